@@ -1,0 +1,16 @@
+"""Errors raised on bad input: one line naming the source, the field and the value."""
+from __future__ import annotations
+
+
+class InputError(ValueError):
+    """Bad user input (file, option, recording). The CLI prints it as one line and exits 2.
+
+    >>> str(InputError("models/x.toml", "motor.resistance_ohm", "'0.6 ohm'", "expected a number"))
+    "models/x.toml: motor.resistance_ohm = '0.6 ohm': expected a number"
+    """
+
+    def __init__(self, source: str, field: str, value: object, problem: str, row: int | None = None):
+        self.source, self.field, self.value, self.problem, self.row = source, field, value, problem, row
+        where = f"{source}" + (f" row {row}" if row is not None else "")
+        shown = value if isinstance(value, str) else repr(value)
+        super().__init__(f"{where}: {field} = {shown}: {problem}")
