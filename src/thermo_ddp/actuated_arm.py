@@ -1,0 +1,191 @@
+"""One differentiable ODE for the arm, its motors and their thermal networks.
+
+State x = [q (rad), v (rad/s), T (°C) of every thermal node of every joint], input u = winding
+current per joint (A), parameter p = room ambient (°C). Everything below is built from the
+CasADi expressions of rigid_body, motor and thermal: simulation, derivatives, code generation
+and the planner all use these same functions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import casadi as ca
+import numpy as np
+
+from . import motor
+from .arm import Arm, ArmSettings, build_arm
+from .errors import InputError
+from .integrators import make_step, step_jacobians
+from .parameters import JointParameters, load_parameters
+from .rigid_body import RigidBodyDynamics
+from .thermal import ThermalNetwork, network_from_parameters
+
+MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+
+
+def default_parameter_file(joint: str) -> Path:
+    return MODELS_DIR / f"{joint}.toml"
+
+
+@dataclass(frozen=True)
+class ActuatedArm:
+    """The composed model. Build it with :func:`load_model` or :meth:`from_parameters`."""
+
+    arm: Arm
+    params: Mapping[str, JointParameters]
+    networks: Mapping[str, ThermalNetwork]
+    ode: ca.Function = field(repr=False)
+    outputs: ca.Function = field(repr=False)
+
+    @classmethod
+    def from_parameters(cls, arm_settings: ArmSettings, params: Mapping[str, JointParameters]) -> "ActuatedArm":
+        for j in arm_settings.joints:
+            if j not in params:
+                raise InputError("model", "parameters", j, "no parameter file for this joint")
+            if params[j].joint != j:
+                raise InputError(params[j].path, "joint.name", params[j].joint, f"expected {j}")
+        arm = build_arm(arm_settings, {j: params[j].motor.armature_kg_m2 for j in arm_settings.joints})
+        params = {j: params[j] for j in arm.joints}
+        networks = {j: network_from_parameters(p.thermal) for j, p in params.items()}
+        ode, outputs = _build_functions(arm, params, networks)
+        return cls(arm, params, networks, ode, outputs)
+
+    # --- names and layout -------------------------------------------------------------
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return self.arm.joints
+
+    @property
+    def nu(self) -> int:
+        return len(self.joints)
+
+    @property
+    def nx(self) -> int:
+        return self.ode.size1_in(0)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        names = [f"{j}:q_rad" for j in self.joints] + [f"{j}:v_rad_s" for j in self.joints]
+        for j in self.joints:
+            names += [f"{j}:{s}" for s in self.networks[j].state_names]
+        return tuple(names)
+
+    @property
+    def control_names(self) -> tuple[str, ...]:
+        return tuple(f"{j}:current_a" for j in self.joints)
+
+    def index(self, joint: str, quantity: str) -> int:
+        """Index in x of e.g. ``("arm_left_4_joint", "winding_c")``."""
+        return self.state_names.index(f"{joint}:{quantity}")
+
+    def node_indices(self, node: str) -> list[int]:
+        """Index of thermal ``node`` for each joint (KeyError if a joint lacks it)."""
+        return [self.index(j, f"{node}_c") for j in self.joints]
+
+    @property
+    def ambient_c(self) -> float:
+        return float(np.mean([p.thermal.ambient_c for p in self.params.values()]))
+
+    # --- states -----------------------------------------------------------------------
+    def idle_temperatures(self, ambient_c: float | None = None) -> np.ndarray:
+        """Steady temperatures of every node with no current and no motion (drive idle heat)."""
+        amb = self.ambient_c if ambient_c is None else ambient_c
+        zero = {"joule_w": 0.0, "friction_w": 0.0, "current_sq_a2": 0.0}
+        return np.concatenate([self.networks[j].steady_state(zero, amb) for j in self.joints])
+
+    def state(self, q=None, v=None, temperatures_c=None) -> np.ndarray:
+        """A state vector; defaults: q = 0 (arm hanging), v = 0, the idle temperatures."""
+        n = self.nu
+        q = np.zeros(n) if q is None else np.asarray(q, float)
+        v = np.zeros(n) if v is None else np.asarray(v, float)
+        t = self.idle_temperatures() if temperatures_c is None else np.asarray(temperatures_c, float)
+        return np.concatenate([q, v, t])
+
+    # --- functions --------------------------------------------------------------------
+    def step(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
+        """Named ``step(x, current_a, ambient_c) -> x_next``."""
+        return make_step(self.ode, dt_s, integrator)
+
+    def step_jacobians(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
+        return step_jacobians(self.step(dt_s, integrator))
+
+    def static_current_a(self, q) -> np.ndarray:
+        """Currents that hold posture ``q`` at rest (gravity only; friction is zero at v = 0)."""
+        g = self.arm.gravity_torque_nm(q)
+        return np.array([float(motor.current_for_torque_a(self.params[j].motor, g[k]))
+                         for k, j in enumerate(self.joints)])
+
+    def simulate(self, x0, current_a, dt_s: float, integrator: str = "rk4", ambient_c=None) -> "Trajectory":
+        """Plant simulation with zero-order-hold currents ``current_a`` of shape (N, nu)."""
+        u = np.atleast_2d(np.asarray(current_a, float))
+        if u.shape[1] != self.nu:
+            u = u.reshape(-1, self.nu)
+        n = u.shape[0]
+        amb = np.full(n, self.ambient_c if ambient_c is None else ambient_c, dtype=float)
+        sim = self.step(dt_s, integrator).mapaccum(n)
+        xs = np.array(sim(np.asarray(x0, float), u.T, amb.reshape(1, -1))).T
+        xs = np.vstack([np.asarray(x0, float), xs])
+        return Trajectory(self, np.arange(n + 1) * dt_s, xs, u, amb)
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """States xs (N+1, nx) and currents us (N, nu) on ``time_s``, with named accessors."""
+
+    model: ActuatedArm
+    time_s: np.ndarray
+    xs: np.ndarray
+    us: np.ndarray
+    ambient_c: np.ndarray
+
+    def __getitem__(self, quantity: str) -> np.ndarray:
+        """``traj["winding_c"]`` -> (N+1, joints); also q_rad, v_rad_s and other node names."""
+        return self.xs[:, [self.model.index(j, quantity) for j in self.model.joints]]
+
+    def output(self, name: str) -> np.ndarray:
+        """(N, joints) of an ``outputs`` quantity (voltage_v, joule_w, ...) at each control knot."""
+        f = self.model.outputs.map(len(self.us))
+        out = f(self.xs[:-1].T, self.us.T, self.ambient_c.reshape(1, -1))
+        return np.array(out[self.model.outputs.name_out().index(name)]).T
+
+
+def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Function]:
+    n = arm.nv
+    sizes = [len(networks[j].nodes) for j in arm.joints]
+    x = ca.SX.sym("x", 2 * n + sum(sizes))
+    u = ca.SX.sym("current_a", n)
+    ambient = ca.SX.sym("ambient_c")
+    q, v = x[:n], x[n:2 * n]
+    offsets = np.cumsum([2 * n] + sizes)
+    tau, dtemps, outs = [], [], {k: [] for k in ("voltage_v", "joint_torque_nm", "joule_w", "friction_w",
+                                                 "winding_c", "sensor_c")}
+    for k, j in enumerate(arm.joints):
+        m, net = params[j].motor, networks[j]
+        temps = x[offsets[k]:offsets[k + 1]]
+        winding = temps[net.index(net.limit_node)]
+        losses = motor.losses_w(m, u[k], v[k], winding)
+        tau.append(motor.joint_torque_nm(m, u[k], v[k]))
+        dtemps.append(net.rhs(temps, losses, ambient))
+        for key, val in (("voltage_v", motor.voltage_v(m, u[k], v[k], winding)), ("joint_torque_nm", tau[-1]),
+                         ("joule_w", losses["joule_w"]), ("friction_w", losses["friction_w"]),
+                         ("winding_c", winding), ("sensor_c", temps[net.index(net.sensor_node)])):
+            outs[key].append(val)
+    accel = RigidBodyDynamics(arm.model).aba(q, v, ca.vertcat(*tau))
+    ode = ca.Function("arm_ode", [x, u, ambient], [ca.vertcat(v, accel, *dtemps)],
+                      ["x", "current_a", "ambient_c"], ["xdot"])
+    outputs = ca.Function("arm_outputs", [x, u, ambient], [ca.vertcat(*vals) for vals in outs.values()],
+                          ["x", "current_a", "ambient_c"], list(outs))
+    return ode, outputs
+
+
+def load_model(joints=("arm_left_4_joint",), payload_kg: float = 0.0, payload_lever_m: float | None = None,
+               posture: Mapping[str, float] | None = None,
+               parameter_files: Mapping[str, str | Path] | None = None) -> ActuatedArm:
+    """The composed model from ``models/<joint>.toml`` (or the given files)."""
+    files = {j: default_parameter_file(j) for j in joints}
+    files.update(parameter_files or {})
+    kwargs = {} if payload_lever_m is None else {"payload_lever_m": payload_lever_m}
+    settings = ArmSettings(joints=tuple(joints), posture=dict(posture or {}), payload_kg=payload_kg, **kwargs)
+    return ActuatedArm.from_parameters(settings, {j: load_parameters(files[j]) for j in joints})

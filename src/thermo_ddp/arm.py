@@ -1,0 +1,131 @@
+"""The Talos left arm from example-robot-data, reduced to chosen joints, with a payload.
+
+We use the PyPI package ``example-robot-data`` 6 (URDFs only) and build the Pinocchio model
+ourselves; its armature (N^2 B_m) is set here from the motor parameter files, once.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import site
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import InputError
+
+log = logging.getLogger(__name__)
+
+ROBOT_URDF = "talos_data/robots/talos_reduced.urdf"
+LEFT_ARM = tuple(f"arm_left_{i}_joint" for i in range(1, 8))
+ELBOW = "arm_left_4_joint"
+PAYLOAD_FRAME = "arm_left_4_link"
+GRIPPER_FRAME = "gripper_left_base_link"
+GRIPPER_LEVER_M = 0.357  # elbow axis to gripper_left_base_link in talos_reduced.urdf: 0.3573 m
+
+
+def robots_dir() -> Path:
+    """example-robot-data's ``robots/`` folder (env EXAMPLE_ROBOT_DATA_MODEL_DIR wins)."""
+    candidates = [os.environ.get("EXAMPLE_ROBOT_DATA_MODEL_DIR", "")]
+    roots = [*site.getsitepackages(), site.getusersitepackages(), *sys.path]
+    candidates += [str(Path(r) / "cmeel.prefix/share/example-robot-data/robots") for r in roots]
+    for c in candidates:
+        if c and (Path(c) / ROBOT_URDF).is_file():
+            return Path(c)
+    raise FileNotFoundError("example-robot-data URDFs not found: pip install 'example-robot-data>=6'")
+
+
+@dataclass(frozen=True)
+class ArmSettings:
+    """Which joints move, where the others are held, and the payload.
+
+    ``posture`` gives the angle of any locked joint (default 0 rad: with every arm joint at 0 the
+    upper arm hangs vertically and the elbow lifts the forearm against gravity).
+    """
+
+    joints: tuple[str, ...] = (ELBOW,)
+    posture: Mapping[str, float] = field(default_factory=dict)
+    payload_kg: float = 0.0
+    payload_lever_m: float = GRIPPER_LEVER_M
+    robot: str = ROBOT_URDF
+
+    def __post_init__(self):
+        object.__setattr__(self, "joints", tuple(self.joints))
+        if not self.joints or len(set(self.joints)) != len(self.joints):
+            raise InputError("arm", "joints", list(self.joints), "need distinct joint names")
+        for j in self.joints:
+            if j not in LEFT_ARM:
+                raise InputError("arm", "joints", j, f"not a left-arm joint; choose from {', '.join(LEFT_ARM)}")
+        if self.payload_kg < 0 or not np.isfinite(self.payload_kg):
+            raise InputError("arm", "payload_kg", self.payload_kg, "must be >= 0")
+        if not 0 <= self.payload_lever_m <= 0.6:
+            raise InputError("arm", "payload_lever_m", self.payload_lever_m, "must be within [0, 0.6] m")
+
+
+@dataclass(frozen=True)
+class Arm:
+    """A reduced Pinocchio model of the arm with its payload; joints ordered as ``joints``."""
+
+    settings: ArmSettings
+    model: pin.Model
+    locked_joints: Mapping[str, float]
+    payload_translation_m: np.ndarray
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(self.model.names[1:])
+
+    @property
+    def nv(self) -> int:
+        return self.model.nv
+
+    def joint_index(self, name: str) -> int:
+        return self.joints.index(name)
+
+    def payload_dict(self) -> dict:
+        return {"mass_kg": self.settings.payload_kg, "lever_m": self.settings.payload_lever_m,
+                "frame": PAYLOAD_FRAME, "translation_m": self.payload_translation_m.tolist()}
+
+    def gravity_torque_nm(self, q: np.ndarray) -> np.ndarray:
+        return pin.computeGeneralizedGravity(self.model, self.model.createData(), np.asarray(q, float))
+
+
+def _forearm_direction(full: pin.Model) -> np.ndarray:
+    """Unit vector from the elbow axis to the gripper, in the elbow frame at the neutral posture."""
+    data = full.createData()
+    pin.framesForwardKinematics(full, data, pin.neutral(full))
+    elbow = data.oMi[full.getJointId(ELBOW)]
+    p = elbow.actInv(data.oMf[full.getFrameId(GRIPPER_FRAME)]).translation
+    return p / np.linalg.norm(p)
+
+
+def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str, float] | None = None) -> Arm:
+    """Load Talos, lock every joint but ``settings.joints``, add the payload and the armature."""
+    full = pin.buildModelFromUrdf(str(robots_dir() / settings.robot))
+    names = list(full.names[1:])
+    for j in settings.posture:
+        if j not in names:
+            raise InputError("arm", "posture", j, "unknown joint")
+    q_lock = pin.neutral(full)
+    for j, angle in settings.posture.items():
+        q_lock[full.joints[full.getJointId(j)].idx_q] = angle
+    lock_ids = [full.getJointId(n) for n in names if n not in settings.joints]
+    direction = _forearm_direction(full)
+    translation = settings.payload_lever_m * direction
+    if settings.payload_kg > 0:
+        # The payload hangs on the forearm: fixed to the elbow's body, locked wrist or not.
+        full.appendBodyToJoint(full.getJointId(ELBOW), pin.Inertia(settings.payload_kg, translation,
+                                                                   np.zeros((3, 3))), pin.SE3.Identity())
+    model = pin.buildReducedModel(full, lock_ids, q_lock)
+    order = [list(model.names).index(j) for j in settings.joints]
+    if order != sorted(order):
+        raise InputError("arm", "joints", list(settings.joints), "list joints from shoulder to wrist")
+    for j, value in (armature_kg_m2 or {}).items():
+        model.armature[model.getJointId(j) - 1] = value
+    locked = {full.names[i]: float(q_lock[full.joints[i].idx_q]) for i in lock_ids}
+    log.debug("arm %s, payload %.1f kg at %s", settings.joints, settings.payload_kg, translation)
+    return Arm(settings, model, locked, translation)

@@ -1,0 +1,47 @@
+"""The model demo: can the elbow hold 40 kg at the gripper, and how fast does its winding heat?"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .actuated_arm import load_model
+
+ELBOW = "arm_left_4_joint"
+
+
+@dataclass(frozen=True)
+class HoldDemo:
+    payload_kg: float
+    lever_m: float
+    torque_nm: float
+    current_a: float
+    nominal_current_a: float
+    idle_winding_c: float
+    winding_c_at: dict
+    time_to_c: dict
+
+    def report(self) -> str:
+        lines = [f"Elbow holding {self.payload_kg:g} kg at {self.lever_m:.3f} m, forearm horizontal:",
+                 f"  static joint torque {self.torque_nm:8.1f} N·m",
+                 f"  static current      {self.current_a:8.2f} A  ({abs(self.current_a) / self.nominal_current_a:.1f}x nominal)",
+                 f"  winding at start    {self.idle_winding_c:8.1f} °C (idle, drive-heated)"]
+        lines += [f"  winding after {t:3.0f} s  {c:8.1f} °C" for t, c in self.winding_c_at.items()]
+        lines += [f"  reaches {c:.0f} °C after {t:6.1f} s" if np.isfinite(t) else f"  never reaches {c:.0f} °C"
+                  for c, t in self.time_to_c.items()]
+        return "\n".join(lines)
+
+
+def hold_demo(payload_kg: float = 40.0, hold_s: float = 60.0, dt_s: float = 0.01) -> HoldDemo:
+    model = load_model((ELBOW,), payload_kg=payload_kg)
+    q = np.array([-np.pi / 2])
+    current = model.static_current_a(q)
+    steps = round(hold_s / dt_s)
+    traj = model.simulate(model.state(q=q), np.tile(current, (steps, 1)), dt_s)
+    winding = traj["winding_c"][:, 0]
+    at = {t: float(np.interp(t, traj.time_s, winding)) for t in (10.0, 30.0, 60.0) if t <= hold_s}
+    limits = model.params[ELBOW].limits
+    first = {c: float(traj.time_s[np.argmax(winding >= c)]) if winding.max() >= c else float("inf")
+             for c in (limits.safety_cutoff_c, limits.winding_max_c)}
+    return HoldDemo(payload_kg, model.arm.settings.payload_lever_m, float(model.arm.gravity_torque_nm(q)[0]),
+                    float(current[0]), model.params[ELBOW].motor.current_nominal_a, float(winding[0]), at, first)

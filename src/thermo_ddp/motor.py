@@ -1,0 +1,57 @@
+"""Motor electro-mechanics (seed report eqs. 1-5), written once as CasADi-compatible expressions.
+
+Every function takes a parameter object with the attributes of ``MotorParameters`` (floats, or
+CasADi symbols for identification) and joint-side velocities in rad/s; the input is the winding
+current in A. Motor-side quantities are obtained through the gear ratio.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+
+def resistance_ohm(m, winding_c):
+    """Eq. (3): R(T_w) = R_ref (1 + alpha_Cu (T_w - T_ref))."""
+    return m.resistance_ohm * (1 + m.copper_alpha_per_k * (winding_c - m.resistance_ref_c))
+
+
+def friction_torque_nm(m, velocity_rad_s):
+    """Joint-side friction: viscous + Coulomb smoothed by tanh so that derivatives exist."""
+    return (m.viscous_friction_nm_s_per_rad * velocity_rad_s
+            + m.coulomb_friction_nm * ca.tanh(velocity_rad_s / m.coulomb_smoothing_rad_s))
+
+
+def joint_torque_nm(m, current_a, velocity_rad_s):
+    """Eq. (4) through the gear, minus friction: N K_m i - tau_f(v) (contract's joint torque)."""
+    return m.gear_ratio * m.torque_constant_nm_per_a * current_a - friction_torque_nm(m, velocity_rad_s)
+
+
+def back_emf_v(m, velocity_rad_s):
+    """Eq. (2): V_b = K_b theta_dot_m, with theta_dot_m = N v."""
+    return m.back_emf_v_s_per_rad * m.gear_ratio * velocity_rad_s
+
+
+def voltage_v(m, current_a, velocity_rad_s, winding_c):
+    """Eq. (4) rearranged: V = R(T_w) i + V_b; must stay within the bus voltage."""
+    return resistance_ohm(m, winding_c) * current_a + back_emf_v(m, velocity_rad_s)
+
+
+def joule_w(m, current_a, winding_c):
+    """Eq. (5): P_J = R(T_w) i^2."""
+    return resistance_ohm(m, winding_c) * current_a ** 2
+
+
+def friction_w(m, velocity_rad_s):
+    """Mechanical power dissipated by friction, tau_f(v) v >= 0."""
+    return friction_torque_nm(m, velocity_rad_s) * velocity_rad_s
+
+
+def losses_w(m, current_a, velocity_rad_s, winding_c) -> dict:
+    """The named losses a thermal network's heat sources may draw on."""
+    return {"joule_w": joule_w(m, current_a, winding_c),
+            "friction_w": friction_w(m, velocity_rad_s),
+            "current_sq_a2": current_a ** 2}
+
+
+def current_for_torque_a(m, torque_nm, velocity_rad_s=0.0):
+    """Static inverse of ``joint_torque_nm``: the current that yields ``torque_nm`` at ``velocity``."""
+    return (torque_nm + friction_torque_nm(m, velocity_rad_s)) / (m.gear_ratio * m.torque_constant_nm_per_a)
