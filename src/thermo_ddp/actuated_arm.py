@@ -17,7 +17,7 @@ import numpy as np
 from . import motor
 from .arm import Arm, ArmSettings, build_arm
 from .errors import InputError
-from .integrators import make_step, step_jacobians
+from .integrators import make_step, rk4_step_jacobians, step_jacobians
 from .parameters import JointParameters, load_parameters
 from .rigid_body import RigidBodyDynamics
 from .thermal import ThermalNetwork, network_from_parameters
@@ -37,6 +37,7 @@ class ActuatedArm:
     params: Mapping[str, JointParameters]
     networks: Mapping[str, ThermalNetwork]
     ode: ca.Function = field(repr=False)
+    ode_jacobians: ca.Function = field(repr=False)
     outputs: ca.Function = field(repr=False)
 
     @classmethod
@@ -49,8 +50,7 @@ class ActuatedArm:
         arm = build_arm(arm_settings, {j: params[j].motor.armature_kg_m2 for j in arm_settings.joints})
         params = {j: params[j] for j in arm.joints}
         networks = {j: network_from_parameters(p.thermal) for j, p in params.items()}
-        ode, outputs = _build_functions(arm, params, networks)
-        return cls(arm, params, networks, ode, outputs)
+        return cls(arm, params, networks, *_build_functions(arm, params, networks))
 
     # --- names and layout -------------------------------------------------------------
     @property
@@ -109,6 +109,9 @@ class ActuatedArm:
         return make_step(self.ode, dt_s, integrator)
 
     def step_jacobians(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
+        """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)``."""
+        if integrator == "rk4":
+            return rk4_step_jacobians(self.ode_jacobians, dt_s)
         return step_jacobians(self.step(dt_s, integrator))
 
     def static_current_a(self, q) -> np.ndarray:
@@ -151,7 +154,8 @@ class Trajectory:
         return np.array(out[self.model.outputs.name_out().index(name)]).T
 
 
-def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Function]:
+def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """``arm_ode``, ``arm_ode_jacobians`` (analytic rigid-body partials) and ``arm_outputs``."""
     n = arm.nv
     sizes = [len(networks[j].nodes) for j in arm.joints]
     x = ca.SX.sym("x", 2 * n + sum(sizes))
@@ -172,12 +176,24 @@ def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Functi
                          ("joule_w", losses["joule_w"]), ("friction_w", losses["friction_w"]),
                          ("winding_c", winding), ("sensor_c", temps[net.index(net.sensor_node)])):
             outs[key].append(val)
-    accel = RigidBodyDynamics(arm.model).aba(q, v, ca.vertcat(*tau))
-    ode = ca.Function("arm_ode", [x, u, ambient], [ca.vertcat(v, accel, *dtemps)],
-                      ["x", "current_a", "ambient_c"], ["xdot"])
+    tau, dtemps = ca.vertcat(*tau), ca.vertcat(*dtemps)
+    tau_sym = ca.SX.sym("tau", n)
+    acc, da_dq, da_dv, minv = (ca.substitute(e, tau_sym, tau)
+                               for e in RigidBodyDynamics(arm.model).aba_derivatives(q, v, tau_sym))
+    xdot = ca.vertcat(v, acc, dtemps)
+    nt = x.numel() - 2 * n
+    dxdot_dx = ca.vertcat(
+        ca.horzcat(ca.SX.zeros(n, n), ca.SX.eye(n), ca.SX.zeros(n, nt)),
+        ca.horzcat(da_dq, da_dv + minv @ ca.jacobian(tau, v), ca.SX.zeros(n, nt)),
+        ca.jacobian(dtemps, x))
+    dxdot_du = ca.vertcat(ca.SX.zeros(n, n), minv @ ca.jacobian(tau, u), ca.jacobian(dtemps, u))
+    names_in = ["x", "current_a", "ambient_c"]
+    ode = ca.Function("arm_ode", [x, u, ambient], [xdot], names_in, ["xdot"])
+    ode_jac = ca.Function("arm_ode_jacobians", [x, u, ambient], [xdot, dxdot_dx, dxdot_du], names_in,
+                          ["xdot", "dxdot_dx", "dxdot_du"])
     outputs = ca.Function("arm_outputs", [x, u, ambient], [ca.vertcat(*vals) for vals in outs.values()],
-                          ["x", "current_a", "ambient_c"], list(outs))
-    return ode, outputs
+                          names_in, list(outs))
+    return ode, ode_jac, outputs
 
 
 def load_model(joints=("arm_left_4_joint",), payload_kg: float = 0.0, payload_lever_m: float | None = None,

@@ -43,6 +43,25 @@ def make_step(ode: ca.Function, dt: float, integrator: str = "rk4") -> ca.Functi
     raise ValueError(f"integrator {integrator!r}: choose one of {INTEGRATORS}")
 
 
+def rk4_step_jacobians(ode_jacobians: ca.Function, dt: float) -> ca.Function:
+    """RK4 step and its Jacobians by the chain rule through the four stages, from
+    ``ode_jacobians(x, u, p) -> (xdot, dxdot_dx, dxdot_du)`` (equal to AD of the RK4 step)."""
+    x, u, p = (ca.SX.sym(n, ode_jacobians.size1_in(i)) for i, n in enumerate(ode_jacobians.name_in()))
+    eye = ca.SX.eye(x.numel())
+    f, kx, ku = ode_jacobians(x, u, p)
+    fs, kxs, kus = [f], [kx], [ku]
+    for c in (0.5, 0.5, 1.0):
+        f, a, b = ode_jacobians(x + dt * c * fs[-1], u, p)
+        kxs.append(a @ (eye + dt * c * kxs[-1]))
+        kus.append(a @ (dt * c * kus[-1]) + b)
+        fs.append(f)
+    w = (1 / 6, 1 / 3, 1 / 3, 1 / 6)
+    xn = x + dt * sum(wi * fi for wi, fi in zip(w, fs))
+    a = eye + dt * sum(wi * ki for wi, ki in zip(w, kxs))
+    b = dt * sum(wi * ki for wi, ki in zip(w, kus))
+    return ca.Function("step_jacobians", [x, u, p], [xn, a, b], ode_jacobians.name_in(), ["x_next", "A", "B"])
+
+
 def step_jacobians(step: ca.Function) -> ca.Function:
     """``step_jacobians(x, u, p) -> (x_next, A, B)`` with A = d x_next/dx, B = d x_next/du."""
     x, u, p = (ca.SX.sym(n, step.size1_in(i)) for i, n in enumerate(step.name_in()))

@@ -1,0 +1,198 @@
+"""Which candidate physics to add?  General acceptance rule and greedy forward selection.
+
+A candidate term is accepted only if all three hold (information criteria alone are not
+trusted: with thousands of autocorrelated samples AIC/BIC accept almost anything):
+
+(a) **it explains the located mismatch**: inside the mismatch intervals the mean-square residual
+    falls by at least ``min_local_gain`` and the squared-residual reduction is concentrated there
+    (share of the reduction inside / share of samples inside >= ``min_concentration``);
+(b) **it predicts unseen data better**: blocked cross-validation (contiguous held-out blocks or
+    whole recordings, so autocorrelated neighbours never leak into training) lowers the held-out
+    RMSE by at least ``min_cv_gain`` (relative) and improves at least ``min_block_share`` of the
+    held-out blocks that contain mismatch samples (a local effect cannot improve the other blocks);
+(c) **its parameters are physical**: every parameter of the refitted model lies within the
+    bounds given per term (:class:`TermSpec`), and the fit succeeded.
+
+:func:`forward_select` adds, one at a time, the accepted candidate with the best held-out gain,
+re-localises the mismatch after each addition, and stops when nothing is accepted or nothing
+systematic is left.  It is model-agnostic: the caller supplies ``fit(terms) -> ModelFit`` (any
+least-squares fit with its held-out residual) and ``locate(fit) -> Localisation``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from .._config import require
+from ..identify.fit_report import FitResult
+from .localise import Localisation
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class TermSpec:
+    """A candidate (or baseline) term: physical ``bounds`` of its parameters (inclusive) and the
+    terms it ``requires`` in the model first (e.g. Stribeck excess friction needs Coulomb)."""
+
+    name: str
+    bounds: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
+    requires: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelFit:
+    """A fit of one term set: the in-sample fit and its blocked cross-validation.
+
+    ``cv_residual`` (same samples and order as ``fit.residuals``) is each sample's residual
+    predicted by a fit that did not see its block; ``blocks`` is the block id of each sample.
+    ``recording``/``time_s`` say where each sample comes from (to build mismatch masks).
+    """
+
+    terms: tuple[str, ...]
+    fit: FitResult
+    cv_residual: np.ndarray
+    blocks: np.ndarray
+    recording: np.ndarray
+    time_s: np.ndarray
+
+    @property
+    def cv_rmse(self) -> float:
+        return float(np.sqrt(np.mean(self.cv_residual ** 2)))
+
+    def block_mse(self) -> dict[int, float]:
+        return {int(b): float(np.mean(self.cv_residual[self.blocks == b] ** 2)) for b in np.unique(self.blocks)}
+
+
+@dataclasses.dataclass(frozen=True)
+class SelectionSettings:
+    min_local_gain: float = 0.2
+    min_concentration: float = 1.0
+    min_cv_gain: float = 0.02
+    min_block_share: float = 0.6
+
+    def __post_init__(self) -> None:
+        src = "selection settings"
+        require(0 <= self.min_local_gain < 1, src, "min_local_gain", self.min_local_gain, "must be in [0, 1)")
+        require(self.min_concentration >= 0, src, "min_concentration", self.min_concentration, "must be >= 0")
+        require(0 <= self.min_cv_gain < 1, src, "min_cv_gain", self.min_cv_gain, "must be in [0, 1)")
+        require(0 < self.min_block_share <= 1, src, "min_block_share", self.min_block_share, "must be in (0, 1]")
+
+
+@dataclasses.dataclass(frozen=True)
+class Assessment:
+    """The verdict on one candidate term, with the numbers behind each check."""
+
+    term: str
+    candidate: ModelFit
+    explains: bool
+    predicts: bool
+    physical: bool
+    local_gain: float
+    concentration: float
+    cv_gain: float
+    blocks_improved: str
+    violations: tuple[str, ...]
+    regimes: tuple[str, ...]
+
+    @property
+    def accepted(self) -> bool:
+        return self.explains and self.predicts and self.physical
+
+    @property
+    def evidence(self) -> str:
+        where = "/".join(self.regimes) or "no located mismatch"
+        phys = "parameters physical" if self.physical else "unphysical: " + "; ".join(self.violations)
+        return (f"mismatch in {where}: mean-square residual there -{100 * self.local_gain:.0f}% "
+                f"(reduction concentration {self.concentration:.2f}); held-out RMSE -{100 * self.cv_gain:.1f}% "
+                f"({self.blocks_improved} blocks with mismatch better, blocked CV); {phys}")
+
+
+def mismatch_mask(fit: ModelFit, localisation: Localisation) -> np.ndarray:
+    """Samples of ``fit`` lying inside a mismatch interval of ``localisation``."""
+    mask = np.zeros(fit.time_s.size, dtype=bool)
+    for name in np.unique(fit.recording):
+        rows = fit.recording == name
+        mask[rows] = localisation.mask(str(name), fit.time_s[rows])
+    return mask
+
+
+def physical_violations(parameters: Mapping[str, float], specs: Sequence[TermSpec]) -> tuple[str, ...]:
+    """Parameters outside their bounds, as 'name=value outside [lo, hi]'."""
+    bounds = {k: b for s in specs for k, b in s.bounds.items()}
+    out = []
+    for key, value in parameters.items():
+        lo, hi = bounds.get(key, (-math.inf, math.inf))
+        if not lo <= value <= hi:
+            out.append(f"{key}={value:.4g} outside [{lo:g}, {hi:g}]")
+    return tuple(out)
+
+
+def assess(current: ModelFit, candidate: ModelFit, term: str, localisation: Localisation,
+           specs: Sequence[TermSpec], settings: SelectionSettings | None = None) -> Assessment:
+    """Apply checks (a), (b), (c) to adding ``term`` (``candidate``) to ``current``."""
+    settings = settings or SelectionSettings()
+    mask = mismatch_mask(current, localisation)
+    before, after = current.fit.residuals ** 2, candidate.fit.residuals ** 2
+    inside = mask.any()
+    local_gain = 1 - after[mask].mean() / before[mask].mean() if inside and before[mask].mean() > 0 else 0.0
+    reduction = before - after
+    total = reduction.sum()
+    concentration = (reduction[mask].sum() / total) / mask.mean() if inside and total > 0 else 0.0
+    cv_gain = 1 - candidate.cv_rmse / current.cv_rmse if current.cv_rmse > 0 else 0.0
+    old, new = current.block_mse(), candidate.block_mse()
+    judged = [b for b in old if mask[current.blocks == b].any()] or list(old)
+    better = sum(new[b] < old[b] for b in judged)
+    violations = physical_violations(candidate.fit.parameters, specs)
+    if not candidate.fit.success:
+        violations += (f"fit failed: {candidate.fit.status}: {candidate.fit.message}",)
+    regimes = tuple(sorted({m.regime for m in localisation.mismatches}))
+    return Assessment(term, candidate,
+                      explains=bool(inside and local_gain >= settings.min_local_gain
+                                    and concentration >= settings.min_concentration),
+                      predicts=bool(cv_gain >= settings.min_cv_gain and better >= settings.min_block_share * len(judged)),
+                      physical=not violations, local_gain=float(local_gain), concentration=float(concentration),
+                      cv_gain=float(cv_gain), blocks_improved=f"{better}/{len(judged)}", violations=violations,
+                      regimes=regimes)
+
+
+@dataclasses.dataclass(frozen=True)
+class Selection:
+    """Outcome of forward selection: fits, accepted terms (in order), all verdicts, mismatches."""
+
+    baseline: ModelFit
+    final: ModelFit
+    accepted: tuple[Assessment, ...]
+    assessments: tuple[Assessment, ...]
+    baseline_localisation: Localisation
+    final_localisation: Localisation
+
+
+def forward_select(fit: Callable[[tuple[str, ...]], ModelFit], locate: Callable[[ModelFit], Localisation],
+                   baseline: Sequence[str], library: Sequence[TermSpec], fixed: Sequence[TermSpec] = (),
+                   settings: SelectionSettings | None = None) -> Selection:
+    """Greedy forward selection over the candidate ``library`` starting from ``baseline`` (see
+    module docstring); ``fixed`` gives bounds of baseline terms that are never candidates."""
+    settings = settings or SelectionSettings()
+    specs = tuple(library) + tuple(fixed)
+    current = start = fit(tuple(baseline))
+    found = first = locate(current)
+    accepted, verdicts = [], []
+    while found.mismatches:
+        options = [s for s in library if s.name not in current.terms and set(s.requires) <= set(current.terms)]
+        round_ = [assess(current, fit(current.terms + (s.name,)), s.name, found, specs, settings) for s in options]
+        verdicts += round_
+        for a in round_:
+            log.info("candidate %s: %s -> %s", a.term, a.evidence, "accepted" if a.accepted else "rejected")
+        good = [a for a in round_ if a.accepted]
+        if not good:
+            break
+        best = max(good, key=lambda a: a.cv_gain)
+        accepted.append(best)
+        current = best.candidate
+        found = locate(current)
+    return Selection(start, current, tuple(accepted), tuple(verdicts), first, found)

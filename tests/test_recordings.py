@@ -1,0 +1,217 @@
+"""Recordings: contract CSV validation, ROS 1 bag (real, written by ROS) and ROS 2 bag round trip."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from thermo_ddp.errors import InputError
+from thermo_ddp.recordings import (COLUMNS, Recording, TopicMap, common_time, read_bag, read_bag_joints, read_csv,
+                                   resample)
+
+SHARED = Path(__file__).parents[1].parent / "shared" / "data"
+PANDA_BAG = SHARED / "ros" / "panda_joint_states.bag"
+PANDA_TOPIC = "/joint_states_fake"
+
+
+def _write(path: Path, header: list[str], rows: list[list[str]]) -> Path:
+    path.write_text("\n".join(",".join(r) for r in [header] + rows) + "\n")
+    return path
+
+
+def _valid_table(n: int, columns: list[str]) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(n)
+    data = {"time_s": np.cumsum(rng.uniform(0.001, 1.0, n))}
+    for c in columns:
+        data[c] = rng.uniform(15.0, 90.0, n) if c.endswith("_c") else rng.normal(0, 5, n)
+    return data
+
+
+# ---------- CSV ----------
+
+signal_columns = st.lists(st.sampled_from(COLUMNS[1:]), min_size=1, max_size=4, unique=True)
+fuzz = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+@fuzz
+@given(n=st.integers(2, 30), columns=signal_columns)
+def test_valid_csv_round_trips(tmp_path, n, columns):
+    data = _valid_table(n, columns)
+    rec = Recording(name="r", **data)
+    back = read_csv(rec.to_csv(tmp_path / "r.csv"))
+    assert back.columns == rec.columns
+    for c in rec.columns:
+        np.testing.assert_array_equal(getattr(back, c), getattr(rec, c))
+
+
+@fuzz
+@given(n=st.integers(2, 30), columns=signal_columns, data=st.data())
+def test_nan_names_column_and_row(tmp_path, n, columns, data):
+    table = _valid_table(n, columns)
+    column = data.draw(st.sampled_from(["time_s"] + columns))
+    row = data.draw(st.integers(0, n - 1))
+    table[column][row] = np.nan
+    path = _write(tmp_path / "nan.csv", list(table), [[repr(float(table[c][i])) for c in table] for i in range(n)])
+    with pytest.raises(InputError) as err:
+        read_csv(path)
+    assert (err.value.field, err.value.row) == (column, row + 2)
+    assert "nan.csv" in str(err.value) and f"row {row + 2}" in str(err.value)
+
+
+@fuzz
+@given(n=st.integers(3, 30), data=st.data())
+def test_non_increasing_time_names_row(tmp_path, n, data):
+    table = _valid_table(n, ["effort"])
+    row = data.draw(st.integers(1, n - 1))
+    table["time_s"][row] = table["time_s"][row - 1] - data.draw(st.sampled_from([0.0, 0.5, 10.0]))
+    path = _write(tmp_path / "t.csv", list(table), [[repr(float(table[c][i])) for c in table] for i in range(n)])
+    with pytest.raises(InputError) as err:
+        read_csv(path)
+    assert (err.value.field, err.value.row) == ("time_s", row + 2)
+
+
+@fuzz
+@given(n=st.integers(2, 30), column=st.sampled_from(["temperature_c", "ambient_c"]),
+       kelvin=st.floats(250.0, 420.0), data=st.data())
+def test_kelvin_temperatures_rejected(tmp_path, n, column, kelvin, data):
+    table = _valid_table(n, [column])
+    row = data.draw(st.integers(0, n - 1))
+    table[column][row] = kelvin
+    path = _write(tmp_path / "k.csv", list(table), [[repr(float(table[c][i])) for c in table] for i in range(n)])
+    with pytest.raises(InputError, match="kelvin") as err:
+        read_csv(path)
+    assert (err.value.field, err.value.row) == (column, row + 2)
+
+
+@fuzz
+@given(cell=st.sampled_from(["abc", "", "1,2", "12 V", "--"]), row=st.integers(0, 4))
+def test_non_numeric_cell(tmp_path, cell, row):
+    rows = [[str(i * 0.1), "1.0"] for i in range(5)]
+    rows[row][1] = cell
+    path = _write(tmp_path / "x.csv", ["time_s", "effort"], rows)
+    with pytest.raises(InputError) as err:
+        read_csv(path)
+    assert err.value.row == row + 2
+
+
+@pytest.mark.parametrize("text, field", [("", "file"), ("time_s,effort\n", "file"), ("effort\n1\n2\n", "time_s"),
+                                         ("time_s,torque\n0,1\n", "torque"), ("time_s,effort\n0,1,2\n", "row")])
+def test_bad_files(tmp_path, text, field):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        read_csv(path)
+    assert err.value.field == field and "bad.csv" in str(err.value)
+
+
+def test_missing_column_required_by_analysis(tmp_path):
+    rec = Recording(name="r", time_s=[0.0, 1.0], effort=[1.0, 2.0])
+    with pytest.raises(InputError, match="temperature_c"):
+        rec.require("effort", "temperature_c")
+
+
+def test_resample_linear_and_bounded():
+    rec = Recording(name="r", time_s=[0.0, 1.0, 3.0], position=[0.0, 2.0, 6.0])
+    out = resample(rec, [0.5, 2.0])
+    np.testing.assert_allclose(out.position, [1.0, 4.0])
+    with pytest.raises(InputError, match="outside"):
+        resample(rec, [0.0, 4.0])
+    other = Recording(name="s", time_s=np.linspace(0.5, 5.0, 10), effort=np.ones(10))
+    grid = common_time([rec, other])
+    assert grid[0] == 0.5 and grid[-1] <= 3.0 and np.all(np.diff(grid) > 0)
+
+
+# ---------- ROS 1: a real bag written by ROS ----------
+
+def test_real_ros1_bag_panda_joint4():
+    rec = read_bag(PANDA_BAG, TopicMap("panda_joint4", joint_states=PANDA_TOPIC))
+    assert len(rec) == 4211 and rec.joint == "panda_joint4"
+    assert 139.0 < rec.time_s[-1] < 141.0
+    assert rec.columns == ("time_s", "position", "velocity", "effort")
+    # panda_joint4 range is [-3.0718, -0.0698] rad (Franka Panda datasheet joint limits)
+    assert np.all((rec.position > -3.0718) & (rec.position < -0.0698))
+    # oracle: the low-level ROS 1 reader, decoding raw messages and indexing by name independently
+    from rosbags.rosbag1 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    with Reader(PANDA_BAG) as reader:
+        raw = [store.deserialize_ros1(d, c.msgtype) for c, _, d in reader.messages()]
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in raw])
+    np.testing.assert_allclose(rec.time_s, stamps - stamps[0], atol=1e-9)
+    for field in ("position", "velocity", "effort"):
+        np.testing.assert_array_equal(getattr(rec, field), [getattr(m, field)[3] for m in raw])
+
+
+def test_real_bag_several_joints_one_pass():
+    joints = read_bag_joints(PANDA_BAG, [TopicMap(f"panda_joint{i}", joint_states=PANDA_TOPIC) for i in (1, 4, 7)])
+    assert set(joints) == {"panda_joint1", "panda_joint4", "panda_joint7"}
+    assert not np.allclose(joints["panda_joint1"].position, joints["panda_joint4"].position)
+
+
+def test_missing_topic_lists_bag_topics():
+    with pytest.raises(InputError) as err:
+        read_bag(PANDA_BAG, TopicMap("panda_joint4", joint_states=PANDA_TOPIC, temperature="/motor_temperature"))
+    message = str(err.value)
+    assert "/motor_temperature" in message and PANDA_TOPIC in message and "\n" not in message
+
+
+def test_unknown_joint_named():
+    with pytest.raises(InputError, match="panda_joint9.*panda_joint1"):
+        read_bag(PANDA_BAG, TopicMap("panda_joint9", joint_states=PANDA_TOPIC))
+
+
+@pytest.mark.parametrize("fraction", [0.001, 0.5, 0.999])
+def test_truncated_bag(tmp_path, fraction):
+    data = PANDA_BAG.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * fraction)])
+    with pytest.raises(InputError, match="cut.bag"):
+        read_bag(cut, TopicMap("panda_joint4", joint_states=PANDA_TOPIC))
+
+
+# ---------- ROS 2: written here with rosbags, read back ----------
+
+def _write_ros2_bag(path: Path, n: int = 200) -> dict[str, np.ndarray]:
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    Time, Header = store.types["builtin_interfaces/msg/Time"], store.types["std_msgs/msg/Header"]
+    JointState = store.types["sensor_msgs/msg/JointState"]
+    Temperature, Float64 = store.types["sensor_msgs/msg/Temperature"], store.types["std_msgs/msg/Float64"]
+    t = 100.0 + 0.01 * np.arange(n)
+    truth = {"time_s": t - t[0], "position": np.sin(t), "velocity": np.cos(t), "effort": 3 * np.sin(2 * t),
+             "temperature_c": 40 + 0.1 * np.arange(n), "current_a": 2 + np.sin(3 * t)}
+    with Writer(path, version=8) as writer:
+        js = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
+        temp = writer.add_connection("/arm_left_4/temperature", Temperature.__msgtype__, typestore=store)
+        cur = writer.add_connection("/arm_left_4/current", Float64.__msgtype__, typestore=store)
+        for k, tk in enumerate(t):
+            ns = int(round(tk * 1e9))
+            header = Header(stamp=Time(sec=int(ns // 10**9), nanosec=int(ns % 10**9)), frame_id="")
+            msg = JointState(header=header, name=["arm_left_3_joint", "arm_left_4_joint"],
+                             position=np.array([0.0, truth["position"][k]]),
+                             velocity=np.array([0.0, truth["velocity"][k]]), effort=np.array([0.0, truth["effort"][k]]))
+            writer.write(js, ns, store.serialize_cdr(msg, msg.__msgtype__))
+            tm = Temperature(header=header, temperature=float(truth["temperature_c"][k]), variance=0.0)
+            writer.write(temp, ns, store.serialize_cdr(tm, tm.__msgtype__))
+            writer.write(cur, ns, store.serialize_cdr(Float64(data=float(truth["current_a"][k])), Float64.__msgtype__))
+    return truth
+
+
+def test_ros2_bag_round_trip(tmp_path):
+    truth = _write_ros2_bag(tmp_path / "bag2")
+    rec = read_bag(tmp_path / "bag2", TopicMap("arm_left_4_joint", joint_states="/joint_states",
+                                               temperature="/arm_left_4/temperature", current="/arm_left_4/current"))
+    for column, values in truth.items():
+        np.testing.assert_allclose(getattr(rec, column), values, atol=1e-6, err_msg=column)
+
+
+def test_ros2_current_from_joint_state_effort(tmp_path):
+    truth = _write_ros2_bag(tmp_path / "bag2", n=20)
+    rec = read_bag(tmp_path / "bag2", TopicMap("arm_left_4_joint", joint_states=None, current="/joint_states"))
+    np.testing.assert_allclose(rec.current_a, truth["effort"], atol=1e-12)
