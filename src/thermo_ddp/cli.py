@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
+from pathlib import Path
 
 from .errors import InputError
 
@@ -14,22 +16,79 @@ def _demo(args) -> int:
     return 0
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="thermo-ddp", description=__doc__)
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
-    sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="static hold of a payload by the elbow: torque, current, winding heating")
+def _write_json(data: dict, path: str | None) -> None:
+    text = json.dumps(data, indent=2)
+    if path is None:
+        print(text)
+        return
+    try:
+        Path(path).write_text(text + "\n")
+    except OSError as err:
+        raise InputError(path, "--json", path, f"cannot write ({err.strerror})") from None
+
+
+def _identify(args) -> int:
+    if args.physics == "mechanical":
+        from .identify.mechanical import identify_mechanical_files as run
+    else:
+        from .identify.thermal import identify_thermal_files as run
+    _write_json(run(args.recordings), args.json)
+    return 0
+
+
+def _diagnose(args) -> int:
+    if args.physics == "mechanical":
+        from .diagnose.mechanical import diagnose_mechanical_files as run
+    else:
+        from .diagnose.thermal import diagnose_thermal_files as run
+    _write_json(run(args.recordings, plot=args.plot), args.json)
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error (the contract: exit 2 with a one-line message)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
+    cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
+    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns)")
+    cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal")
+    cmd.add_argument("--json", metavar="OUT", help="write the result here (default: stdout)")
+    if plot:
+        cmd.add_argument("--plot", metavar="OUT.png", help="write the diagnosis figure here")
+    return cmd
+
+
+def _demo_parser() -> _Parser:
+    demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
+                                                       "current and winding heating")
     demo.add_argument("--payload-kg", type=float, default=40.0)
     demo.add_argument("--hold-s", type=float, default=60.0)
-    demo.set_defaults(run=_demo)
-    return parser
+    return demo
+
+
+COMMANDS = {
+    "demo": (_demo_parser, _demo),
+    "identify": (lambda: _recording_parser("identify", "identify parameters from recordings", False), _identify),
+    "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "
+                                                       "physics, refit and validate", True), _diagnose),
+}
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(name)s: %(message)s")
+    top = _Parser(prog="thermo-ddp", description=__doc__)
+    top.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
+    top.add_argument("command", choices=sorted(COMMANDS))
+    top.add_argument("args", nargs=argparse.REMAINDER, help="the command's arguments (see COMMAND --help)")
+    ns = top.parse_args(argv)
+    make_parser, run = COMMANDS[ns.command]
+    args = make_parser().parse_intermixed_args(ns.args)
+    logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")
     try:
-        return args.run(args)
+        return run(args)
     except InputError as err:
         print(f"thermo-ddp: {err}", file=sys.stderr)
         return 2
