@@ -1,0 +1,13 @@
+"""Simulated elbow ("testbed"): a true plant with the physics the baseline model lacks.
+
+Independent of the package's model code (numpy equations, scipy integration), it generates
+recordings of the seed report's experiments for the identification and diagnosis tests.
+"""
+from .experiments import (COLUMNS, EXPERIMENTS, JOINT, SimulatedRecording, Truth, biceps, random_campaign,
+                          random_recording, static_3a, static_4a, static_hold)
+from .physics import EFFECTS, Ambient, PlantParameters, PlantSolution, Profile, simulate, steady_state
+from .sensors import SensorSettings
+
+__all__ = ["COLUMNS", "EFFECTS", "EXPERIMENTS", "JOINT", "Ambient", "PlantParameters", "PlantSolution", "Profile",
+           "SensorSettings", "SimulatedRecording", "Truth", "biceps", "random_campaign", "random_recording",
+           "simulate", "static_3a", "static_4a", "static_hold", "steady_state"]
