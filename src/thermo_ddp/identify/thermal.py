@@ -1,0 +1,666 @@
+"""Thermal identification: output-error nonlinear least squares on the simulated sensor temperature.
+
+The model is the package's lumped network (``thermo_ddp.thermal``) fed by the motor's losses
+(``thermo_ddp.motor``), built with the free parameters as CasADi symbols, so the fit
+differentiates the same expressions the planner integrates.  Structures (``terms``):
+
+- ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
+- ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing
+  capacities, ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
+- ``drive_heating`` -> ``two_node_drive``: a drive node coupled to the casing and to ambient, heated
+  by ``drive_idle_w + drive_loss_w_per_a2 i^2``; it implies the casing node (the drive heats the casing);
+- ``friction_heating``: ``friction_heating_fraction`` of the friction power tau_f(v) v (friction model
+  of the parameter file) heats the sensor node (one_node) or the casing;
+- ``copper_resistance``: ``copper_alpha_per_k`` free (eq. 3);
+- ``iron_losses``: ``iron_loss_w_s2_per_rad2`` k, a speed-dependent loss k v^2 (joint-side v) in the
+  winding node.  It has no key in the contract's parameter file.
+
+Simulation: each recording on its own (possibly irregular) time grid, inputs held between samples
+(zero-order hold).  Samples closer than ``min_step_s`` are merged (the held losses are averaged
+exactly over the merged interval; residuals only at the kept samples), intervals longer than
+``max_step_s`` (gaps) are cut into sub-steps.  The network is affine in the temperatures for held
+inputs; each (sub-)step is the trapezoidal rule (A-stable, 2nd order) solved exactly for that affine
+system.  Sensitivities d(temperature)/d(parameters) are propagated with the states (forward
+sensitivities of the step, CasADi AD, one ``mapaccum`` per recording), not by finite differences.
+
+Initial state per recording: the network's equilibrium under the first held inputs, plus a fitted
+offset common to all nodes (``initial_offset_c``): the sensor's initial temperature is fitted, the
+unmeasured nodes start in the same relation to it as at equilibrium.
+
+Confidence intervals: the classical s^2 (J^T J)^-1 assumes white residuals; output-error residuals
+are autocorrelated, so the standard errors are inflated by sqrt(integrated autocorrelation time) of
+the residual (an effective-sample-size correction, Geyer's initial positive sequence).  They remain
+local, linearised intervals.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+from scipy import optimize
+
+from .. import motor
+from .._config import require
+from ..errors import InputError
+from ..parameters import JointParameters, ThermalParameters, load_parameters, parameters_from_dict
+from ..recordings import Recording, read_recording
+from ..thermal import HeatSource, network_from_parameters
+from .fit_report import Z95, FitResult, result_from_jacobian
+
+log = logging.getLogger(__name__)
+
+MODELS = ("one_node", "two_node", "two_node_drive")
+THERMAL_TERMS = ("friction_heating", "drive_heating", "casing_node", "copper_resistance", "iron_losses")
+IRON_KEY = "iron_loss_w_s2_per_rad2"
+DEFAULT_PARAMETER_FILE = Path(__file__).resolve().parents[3] / "models" / "arm_left_4_joint.toml"
+
+_NODE_KEYS = {
+    "one_node": ("capacity_j_per_k", "resistance_k_per_w"),
+    "two_node": ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w",
+                 "casing_ambient_k_per_w"),
+}
+_NODE_KEYS["two_node_drive"] = _NODE_KEYS["two_node"] + (
+    "drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w", "drive_idle_w", "drive_loss_w_per_a2")
+_TERM_KEYS = {"friction_heating": ("friction_heating_fraction",), "copper_resistance": ("copper_alpha_per_k",),
+              "iron_losses": (IRON_KEY,)}
+UNITS = {"capacity_j_per_k": "J/K", "resistance_k_per_w": "K/W", "winding_capacity_j_per_k": "J/K",
+         "casing_capacity_j_per_k": "J/K", "winding_casing_k_per_w": "K/W", "casing_ambient_k_per_w": "K/W",
+         "drive_capacity_j_per_k": "J/K", "drive_casing_k_per_w": "K/W", "drive_ambient_k_per_w": "K/W",
+         "drive_idle_w": "W", "drive_loss_w_per_a2": "W/A^2", "friction_heating_fraction": "",
+         "copper_alpha_per_k": "1/K", IRON_KEY: "W s^2/rad^2"}
+# Search bounds of the optimiser (wide, technical; the diagnosis checks narrower physical ranges).
+# "log": fitted as log(value); "lin": fitted as value / scale.
+_SEARCH = {
+    "capacity_j_per_k": ("log", 1.0, 1e6), "winding_capacity_j_per_k": ("log", 0.1, 1e6),
+    "casing_capacity_j_per_k": ("log", 1.0, 1e6), "drive_capacity_j_per_k": ("log", 1.0, 1e6),
+    "resistance_k_per_w": ("log", 1e-3, 100.0), "winding_casing_k_per_w": ("log", 1e-3, 100.0),
+    "casing_ambient_k_per_w": ("log", 1e-3, 100.0), "drive_casing_k_per_w": ("log", 1e-3, 100.0),
+    "drive_ambient_k_per_w": ("log", 1e-3, 1000.0), "drive_idle_w": ("log", 1e-3, 300.0),
+    "drive_loss_w_per_a2": ("lin", 0.0, 5.0, 0.1), "friction_heating_fraction": ("lin", 0.0, 1.0, 1.0),
+    "copper_alpha_per_k": ("lin", 0.0, 0.02, 0.004), IRON_KEY: ("lin", 0.0, 10.0, 0.1),
+}
+_OFFSET_SCALE_C = 1.0
+DRIVE_FIXED = ("drive_ambient_k_per_w", "drive_loss_w_per_a2")
+# Start values used when the parameter file lacks a key: the elbow file's class values
+# (models/arm_left_4_joint.toml, maxon flat-motor class, see its [sources]).
+_FALLBACK = {"winding_capacity_j_per_k": 40.0, "casing_capacity_j_per_k": 1200.0, "winding_casing_k_per_w": 0.9,
+             "casing_ambient_k_per_w": 1.3, "drive_capacity_j_per_k": 300.0, "drive_casing_k_per_w": 0.6,
+             "drive_ambient_k_per_w": 2.5, "drive_idle_w": 23.0, "drive_loss_w_per_a2": 0.1,
+             "friction_heating_fraction": 0.5, IRON_KEY: 0.02}
+_STATUS = {-1: "improper_input", 0: "max_iterations", 1: "converged_gtol", 2: "converged_ftol",
+           3: "converged_xtol", 4: "converged_ftol_xtol"}
+
+
+@dataclasses.dataclass(frozen=True)
+class ThermalSettings:
+    """Grid and optimiser settings.
+
+    ``min_step_s``: merge samples closer than this (0: every sample is a grid point);
+    ``max_step_s``: longest integration sub-step (gaps are cut into sub-steps);
+    ``gap_factor``, ``gap_window_s``: an interval longer than ``gap_factor`` median sample steps is a
+    gap; the losses held over it are the mean over ``gap_window_s`` on both sides;
+    ``head_s``: span at the start of a recording whose median sets the initial offset of a
+    recording the fit does not see (cross-validation); ``max_nfev``: optimiser evaluations;
+    ``chi2_tolerance``: the optimiser stops when an iteration lowers the residual sum of squares by
+    less than this many residual variances (a change of chi^2 far below 1 is statistically void;
+    flat valleys of poorly identifiable parameters are not crawled along).
+    """
+
+    min_step_s: float = 0.0
+    max_step_s: float = 2.0
+    gap_factor: float = 4.0
+    gap_window_s: float = 60.0
+    head_s: float = 30.0
+    max_nfev: int = 200
+    chi2_tolerance: float = 0.05
+
+    def __post_init__(self) -> None:
+        src = "thermal settings"
+        require(self.min_step_s >= 0, src, "min_step_s", self.min_step_s, "must be >= 0")
+        require(self.max_step_s > 0, src, "max_step_s", self.max_step_s, "must be > 0")
+        require(self.head_s >= 0, src, "head_s", self.head_s, "must be >= 0")
+        require(self.gap_factor > 1, src, "gap_factor", self.gap_factor, "must be > 1")
+        require(self.gap_window_s > 0, src, "gap_window_s", self.gap_window_s, "must be > 0")
+        require(self.max_nfev >= 1, src, "max_nfev", self.max_nfev, "must be >= 1")
+        require(0 < self.chi2_tolerance <= 1, src, "chi2_tolerance", self.chi2_tolerance, "must be in (0, 1]")
+
+
+# ----------------------------------------------------------------------------- structure
+def canonical_terms(model: str = "one_node", terms: Sequence[str] = ()) -> tuple[str, ...]:
+    """The term set of ``model`` plus ``terms``, in library order (InputError on unknown names)."""
+    require(model in MODELS, "thermal model", "model", model, f"expected one of {', '.join(MODELS)}")
+    for term in terms:
+        require(term in THERMAL_TERMS, "thermal model", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
+    implied = {"one_node": (), "two_node": ("casing_node",), "two_node_drive": ("drive_heating",)}[model]
+    chosen = set(terms) | set(implied)
+    return tuple(t for t in THERMAL_TERMS if t in chosen)
+
+
+def network_model(terms: Sequence[str]) -> str:
+    """Contract thermal model of a term set: drive_heating implies the casing node."""
+    if "drive_heating" in terms:
+        return "two_node_drive"
+    return "two_node" if "casing_node" in terms else "one_node"
+
+
+def structure_name(terms: Sequence[str]) -> str:
+    """E.g. ``two_node_drive + friction_heating``."""
+    model = network_model(terms)
+    extra = [t for t in terms if t not in ("casing_node", "drive_heating")]
+    return " + ".join([model] + extra)
+
+
+def free_keys(terms: Sequence[str]) -> tuple[str, ...]:
+    keys = _NODE_KEYS[network_model(terms)]
+    for term in THERMAL_TERMS:
+        if term in terms:
+            keys += _TERM_KEYS.get(term, ())
+    return keys
+
+
+def lumped(th: ThermalParameters) -> tuple[float, float]:
+    """(total capacity, total resistance to ambient along the winding path) of any contract network."""
+    if th.model == "one_node":
+        return th["capacity_j_per_k"], th["resistance_k_per_w"]
+    return (th["winding_capacity_j_per_k"] + th["casing_capacity_j_per_k"],
+            th["winding_casing_k_per_w"] + th["casing_ambient_k_per_w"])
+
+
+def start_values(params: JointParameters, terms: Sequence[str],
+                 previous: Mapping[str, float] | None = None) -> dict[str, float]:
+    """Start values of the free parameters: a previous fit's where it has them (a one-node fit is
+    split in the file's winding/casing proportions), else the parameter file's, else class values."""
+    th = params.thermal
+    file_values = dict(th.values) | {"copper_alpha_per_k": params.motor.copper_alpha_per_k}
+    cap, res = lumped(th)
+    file_values.setdefault("capacity_j_per_k", cap)
+    file_values.setdefault("resistance_k_per_w", res)
+    if previous:
+        file_values |= {k: v for k, v in previous.items() if k in _SEARCH}
+        if "capacity_j_per_k" in previous and "casing_capacity_j_per_k" not in previous:
+            cw = file_values.get("winding_capacity_j_per_k", _FALLBACK["winding_capacity_j_per_k"])
+            rw = file_values.get("winding_casing_k_per_w", _FALLBACK["winding_casing_k_per_w"])
+            share_c, share_r = cw / cap, rw / res
+            file_values |= {"winding_capacity_j_per_k": share_c * previous["capacity_j_per_k"],
+                            "casing_capacity_j_per_k": (1 - share_c) * previous["capacity_j_per_k"],
+                            "winding_casing_k_per_w": share_r * previous["resistance_k_per_w"],
+                            "casing_ambient_k_per_w": (1 - share_r) * previous["resistance_k_per_w"]}
+    out = {}
+    for key in free_keys(terms):
+        value = file_values.get(key, _FALLBACK.get(key))
+        if key == "friction_heating_fraction" and not value:
+            value = _FALLBACK[key]
+        kind, lo, hi = _SEARCH[key][:3]
+        span = hi - lo
+        out[key] = float(np.clip(value, lo + 1e-6 * span if kind == "lin" else lo * 1.001, hi - 1e-6 * span))
+    return out
+
+
+class ThermalModel:
+    """One structure (``terms``) of the thermal model with the parameter file's fixed values, as
+    named CasADi functions of the free parameters (contract key names, :func:`free_keys`)."""
+
+    def __init__(self, params: JointParameters, terms: Sequence[str] = (), fixed: Mapping[str, float] | None = None):
+        self.params = params
+        self.terms = canonical_terms("one_node", terms)
+        self.model = network_model(self.terms)
+        self.name = structure_name(self.terms)
+        self.fixed = {k: float(v) for k, v in (fixed or {}).items() if k in free_keys(self.terms)}
+        self.keys = tuple(k for k in free_keys(self.terms) if k not in self.fixed)
+        symbols = ca.SX.sym("parameters", len(self.keys))
+        sym = {k: symbols[i] for i, k in enumerate(self.keys)} | self.fixed
+        values = {k: sym[k] for k in _NODE_KEYS[self.model]}
+        values["friction_heating_fraction"] = sym.get("friction_heating_fraction", 0.0)
+        network = network_from_parameters(ThermalParameters(self.model, params.thermal.ambient_c, values))
+        if IRON_KEY in sym:
+            network = dataclasses.replace(network, sources=network.sources + (HeatSource("winding", "iron_w", sym[IRON_KEY]),))
+        self.network = network
+        self.nodes = network.nodes
+        self.sensor = network.index(network.sensor_node)
+        m = SimpleNamespace(**dataclasses.asdict(params.motor))
+        if "copper_alpha_per_k" in sym:
+            m.copper_alpha_per_k = sym["copper_alpha_per_k"]
+        self._build(symbols, m)
+        self._maps: dict[int, ca.Function] = {}
+
+    def _build(self, p: ca.SX, m: SimpleNamespace) -> None:
+        n, q = len(self.nodes), len(self.keys) + 1  # + the initial offset
+        temps = ca.SX.sym("temperatures_c", n)
+        u = ca.SX.sym("inputs", 5)  # step_s, current_sq_a2, friction_w, velocity_sq, ambient_c
+        h, i_sq, p_fric, v_sq, ambient = (u[k] for k in range(5))
+        powers = motor.losses_w(m, ca.sqrt(i_sq), 0.0, temps[self.network.index("winding")])
+        powers |= {"friction_w": p_fric, "iron_w": v_sq}
+        rhs = self.network.rhs(temps, powers, ambient)
+        a = ca.jacobian(rhs, temps)
+        b = ca.substitute(rhs, temps, ca.SX.zeros(n))
+        nxt = temps + h * ca.solve(ca.SX.eye(n) - 0.5 * h * a, rhs)
+        sens = ca.SX.sym("sensitivities", n, q)
+        d_nxt = ca.jacobian(nxt, temps) @ sens + ca.horzcat(ca.jacobian(nxt, p), ca.SX.zeros(n, 1))
+        z = ca.vertcat(temps, ca.vec(sens))
+        self.step = ca.Function("thermal_step_sensitivities", [z, u, p], [ca.vertcat(nxt, ca.vec(d_nxt))],
+                                ["state_and_sensitivities", "inputs", "parameters"], ["next"])
+        eq = -ca.solve(a, b)
+        offset = ca.SX.sym("initial_offset_c")
+        x0 = eq + offset
+        s0 = ca.jacobian(x0, ca.vertcat(p, offset))
+        self.initial = ca.Function("thermal_initial_state", [u, p, offset], [ca.vertcat(x0, ca.vec(s0))],
+                                   ["inputs", "parameters", "initial_offset_c"], ["state_and_sensitivities"])
+        self.equilibrium = ca.Function("thermal_equilibrium", [u, p], [eq], ["inputs", "parameters"], ["temperatures_c"])
+
+    def _mapped(self, steps: int) -> ca.Function:
+        if steps not in self._maps:
+            self._maps[steps] = self.step.mapaccum("thermal_simulation", steps)
+        return self._maps[steps]
+
+    def simulate(self, grid: "ThermalGrid", values: Sequence[float], offset_c: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(node temperatures at the grid's kept samples (nodes x K), sensor output (K,),
+        d sensor / d[parameters, offset] (K x (p + 1)))."""
+        n, q = len(self.nodes), len(self.keys) + 1
+        p = np.asarray(values, float)
+        z0 = np.asarray(self.initial(grid.inputs[:, 0], p, offset_c)).ravel()
+        z = np.asarray(self._mapped(grid.inputs.shape[1])(z0, grid.inputs, p))
+        z = np.column_stack([z0, z[:, grid.output_index]])
+        temps = z[:n]
+        jac = z[n + self.sensor::n][:q].T
+        return temps, temps[self.sensor], jac
+
+    def equilibrium_sensor(self, grid: "ThermalGrid", values: Sequence[float]) -> float:
+        return float(self.equilibrium(grid.inputs[:, 0], np.asarray(values, float))[self.sensor])
+
+
+# ----------------------------------------------------------------------------- data
+@dataclasses.dataclass(frozen=True)
+class ThermalGrid:
+    """A recording on its integration grid: kept samples and the held inputs of every sub-step."""
+
+    name: str
+    time_s: np.ndarray          # kept sample times (K,)
+    measured_c: np.ndarray      # measured sensor temperature at the kept samples (K,)
+    current_a: np.ndarray       # at the kept samples (for regimes and plots)
+    velocity: np.ndarray        # at the kept samples (zeros when the recording has none)
+    inputs: np.ndarray          # (5, S): step_s, current_sq_a2, friction_w, velocity_sq, ambient_c
+    output_index: np.ndarray    # sub-step after which kept sample k+1 is reached (K-1,)
+    has_velocity: bool
+    has_ambient: bool
+
+    def __len__(self) -> int:
+        return int(self.time_s.size)
+
+
+def _velocity(rec: Recording) -> np.ndarray | None:
+    if rec.velocity is not None:
+        return np.asarray(rec.velocity, float)
+    if rec.position is not None and len(rec) > 2:
+        return np.gradient(np.asarray(rec.position, float), rec.time_s)
+    return None
+
+
+def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSettings | None = None) -> ThermalGrid:
+    """Validate ``rec`` (needs ``current_a`` and ``temperature_c``) and build its integration grid."""
+    settings = settings or ThermalSettings()
+    rec.require("current_a", "temperature_c")
+    src = rec.source or rec.name
+    if len(rec) < 3:
+        raise InputError(src, "time_s", f"{len(rec)} samples", "a thermal fit needs at least 3 samples")
+    t = np.asarray(rec.time_s, float)
+    current = np.asarray(rec.current_a, float)
+    velocity = _velocity(rec)
+    v = np.zeros_like(t) if velocity is None else velocity
+    friction = np.asarray(_friction_w(params)(v[None, :])).ravel()
+    ambient = np.full_like(t, params.thermal.ambient_c) if rec.ambient_c is None else np.asarray(rec.ambient_c, float)
+    features = _bridge_gaps(t, np.vstack([current ** 2, friction, v ** 2, ambient]), settings)
+    keep = _kept(t, settings.min_step_s)
+    dt = np.diff(t)
+    cum = np.concatenate([np.zeros((4, 1)), np.cumsum(features[:, :-1] * dt, axis=1)], axis=1)
+    span = t[keep[1:]] - t[keep[:-1]]
+    held = (cum[:, keep[1:]] - cum[:, keep[:-1]]) / span
+    substeps = np.maximum(np.ceil(span / settings.max_step_s - 1e-9).astype(int), 1)
+    inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
+    return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
+                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None)
+
+
+def _bridge_gaps(t: np.ndarray, features: np.ndarray, settings: "ThermalSettings") -> np.ndarray:
+    """Held losses over gaps (intervals longer than ``gap_factor`` median steps): the mean of the
+    samples within ``gap_window_s`` on both sides, not the last sample (of an oscillating current
+    one sample says little about the power during minutes without data)."""
+    dt = np.diff(t)
+    gaps = np.flatnonzero(dt > settings.gap_factor * np.median(dt))
+    if not gaps.size:
+        return features
+    held = features.copy()
+    for k in gaps:
+        near = ((t >= t[k] - settings.gap_window_s) & (t <= t[k])) | \
+               ((t >= t[k + 1]) & (t <= t[k + 1] + settings.gap_window_s))
+        held[:, k] = features[:, near].mean(axis=1)
+    return held
+
+
+def _kept(t: np.ndarray, min_step_s: float) -> np.ndarray:
+    """Indices of the kept samples: the first sample of every ``min_step_s`` bin, and the last."""
+    if min_step_s <= 0:
+        return np.arange(t.size)
+    bins = np.floor((t - t[0]) / min_step_s)
+    keep = np.flatnonzero(np.concatenate(([True], bins[1:] != bins[:-1])))
+    return keep if keep[-1] == t.size - 1 else np.append(keep, t.size - 1)
+
+
+def _friction_w(params: JointParameters) -> ca.Function:
+    v = ca.SX.sym("velocity_rad_s")
+    return ca.Function("friction_w", [v], [motor.friction_w(params.motor, v)], ["velocity_rad_s"], ["friction_w"])
+
+
+# ----------------------------------------------------------------------------- result
+@dataclasses.dataclass(frozen=True)
+class ThermalFit(FitResult):
+    """A thermal fit: a :class:`FitResult` (parameters with contract key names, inflated standard
+    errors, residuals and fitted sensor temperatures of all recordings, concatenated) plus the
+    structure, per-recording initial states and the samples each recording contributed."""
+
+    terms: tuple[str, ...] = ()
+    recordings: tuple[str, ...] = ()
+    sample_counts: tuple[int, ...] = ()
+    initial_offset_c: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    stderr_inflation: float = 1.0
+    nodes: tuple[str, ...] = ()
+    node_temperatures_c: tuple[np.ndarray, ...] = ()  # per recording, nodes x samples
+    nfev: int = 0
+
+    @property
+    def network_model(self) -> str:
+        return network_model(self.terms)
+
+    def rows(self, recording: str) -> slice:
+        """Samples of ``recording`` in the concatenated arrays."""
+        start = 0
+        for name, count in zip(self.recordings, self.sample_counts):
+            if name == recording:
+                return slice(start, start + count)
+            start += count
+        raise KeyError(recording)
+
+    @property
+    def confidence(self) -> dict[str, tuple[float, float]]:
+        """95 % intervals; log-normal for the parameters fitted in log-space (always positive)."""
+        out = {}
+        for key, err in self.stderr.items():
+            value = self.parameters[key]
+            if _SEARCH[key][0] == "log" and value > 0:
+                factor = math.exp(Z95 * err / value)
+                out[key] = (value / factor, value * factor)
+            else:
+                out[key] = (value - Z95 * err, value + Z95 * err)
+        return out
+
+
+def _to_theta(keys: Sequence[str], values: Mapping[str, float]) -> np.ndarray:
+    out = []
+    for k in keys:
+        spec = _SEARCH[k]
+        out.append(math.log(values[k]) if spec[0] == "log" else values[k] / spec[3])
+    return np.array(out)
+
+
+def _from_theta(keys: Sequence[str], theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Physical values and d value / d theta."""
+    values, deriv = np.empty(len(keys)), np.empty(len(keys))
+    for i, k in enumerate(keys):
+        spec = _SEARCH[k]
+        if spec[0] == "log":
+            values[i] = deriv[i] = math.exp(theta[i])
+        else:
+            values[i], deriv[i] = theta[i] * spec[3], spec[3]
+    return values, deriv
+
+
+def _theta_bounds(keys: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    lo = [math.log(_SEARCH[k][1]) if _SEARCH[k][0] == "log" else _SEARCH[k][1] / _SEARCH[k][3] for k in keys]
+    hi = [math.log(_SEARCH[k][2]) if _SEARCH[k][0] == "log" else _SEARCH[k][2] / _SEARCH[k][3] for k in keys]
+    return np.array(lo), np.array(hi)
+
+
+def integrated_autocorrelation(residual: np.ndarray) -> float:
+    """1 + 2 sum of autocorrelations (Geyer's initial positive sequence): variance inflation of a mean."""
+    x = np.asarray(residual, float) - np.mean(residual)
+    n = x.size
+    if n < 4 or not np.any(x):
+        return 1.0
+    spectrum = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    acf /= acf[0]
+    m = n // 2
+    gamma = acf[0:2 * m:2] + acf[1:2 * m:2]  # Gamma_k = rho_2k + rho_2k+1
+    stop = np.flatnonzero(gamma <= 0)
+    tau = -1.0 + 2.0 * gamma[: stop[0] if stop.size else m].sum()
+    return float(min(max(tau, 1.0), n))
+
+
+class _Problem:
+    """Stacked residual and Jacobian of several recordings for the optimiser (memoised per theta)."""
+
+    def __init__(self, model: ThermalModel, grids: Sequence[ThermalGrid], weights: Sequence[np.ndarray]):
+        self.model, self.grids, self.weights = model, grids, weights
+        self.p = len(model.keys)
+        self._last: tuple[bytes, tuple] | None = None
+        self.nfev = 0
+
+    def evaluate(self, theta: np.ndarray):
+        key = theta.tobytes()
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        values, dvalue = _from_theta(self.model.keys, theta[:self.p])
+        offsets = theta[self.p:] * _OFFSET_SCALE_C
+        res, jac = [], np.zeros((sum(len(g) for g in self.grids), theta.size))
+        row = 0
+        for r, (grid, w) in enumerate(zip(self.grids, self.weights)):
+            _, y, j = self.model.simulate(grid, values, offsets[r])
+            k = len(grid)
+            res.append(w * (y - grid.measured_c))
+            jac[row:row + k, :self.p] = w[:, None] * j[:, :self.p] * dvalue
+            jac[row:row + k, self.p + r] = w * j[:, self.p] * _OFFSET_SCALE_C
+            row += k
+        r_all = np.concatenate(res)
+        if not np.all(np.abs(r_all) < 1e6):  # runaway or overflow: tell the optimiser the step failed
+            r_all = np.full_like(r_all, np.inf)
+        self.nfev += 1
+        self._last = (key, (r_all, jac))
+        return r_all, jac
+
+    def fun(self, theta):
+        return self.evaluate(theta)[0]
+
+    def jac(self, theta):
+        return self.evaluate(theta)[1]
+
+
+def head_offset(model: ThermalModel, grid: ThermalGrid, values: Sequence[float], head_s: float) -> float:
+    """Initial offset set from the first measurements (median over ``head_s``) of ``grid``."""
+    head = grid.measured_c[grid.time_s <= grid.time_s[0] + head_s]
+    return float(np.median(head) - model.equilibrium_sensor(grid, values))
+
+
+def fit_grids(model: ThermalModel, grids: Sequence[ThermalGrid], *, start: Mapping[str, float] | None = None,
+              offsets: Sequence[float] | None = None, weights: Sequence[np.ndarray] | None = None,
+              settings: ThermalSettings | None = None) -> ThermalFit:
+    """Output-error fit of ``model`` to ``grids`` (shared parameters, one initial offset per grid).
+
+    ``weights`` (per grid, per kept sample; 0 = unseen) select the samples the cost sees; residuals
+    and fitted values are returned for every sample.  A grid whose weights are all 0 gets its
+    initial offset from its first measurements (:func:`head_offset`), not from the fit.
+    """
+    settings = settings or ThermalSettings()
+    start = dict(start or start_values(model.params, model.terms))
+    weights = [np.ones(len(g)) for g in grids] if weights is None else [np.asarray(w, float) for w in weights]
+    keys, p = model.keys, len(model.keys)
+    vals0 = [start[k] for k in keys]
+    if offsets is None:
+        offsets = [head_offset(model, g, vals0, settings.head_s) for g in grids]
+    theta0 = np.concatenate([_to_theta(keys, start), np.asarray(offsets, float) / _OFFSET_SCALE_C])
+    lo, hi = _theta_bounds(keys)
+    unseen = [r for r, w in enumerate(weights) if not np.any(w)]
+    lo = np.concatenate([lo, np.full(len(grids), -np.inf)])
+    hi = np.concatenate([hi, np.full(len(grids), np.inf)])
+    problem = _Problem(model, grids, weights)
+    theta0 = np.clip(theta0, lo, hi)
+    seen = np.array([True] * p + [r not in unseen for r in range(len(grids))])
+    n_used = int(sum(np.count_nonzero(w) for w in weights))
+    try:
+        sol = optimize.least_squares(lambda th: problem.fun(_merge(th, theta0, seen)),
+                                     theta0[seen], lambda th: problem.jac(_merge(th, theta0, seen))[:, seen],
+                                     bounds=(lo[seen], hi[seen]), method="trf", tr_solver="lsmr",
+                                     max_nfev=settings.max_nfev, ftol=settings.chi2_tolerance / max(n_used, 1), xtol=1e-10, gtol=1e-10)
+    except ValueError as err:  # non-finite residual at the start (e.g. thermal runaway)
+        return _failed(model, grids, start, "not_finite", f"simulation not finite at the start values ({err})")
+    theta = _merge(sol.x, theta0, seen)
+    if unseen:
+        values, _ = _from_theta(keys, theta[:p])
+        for r in unseen:
+            theta[p + r] = head_offset(model, grids[r], values, settings.head_s) / _OFFSET_SCALE_C
+    status = _STATUS.get(sol.status, str(sol.status))
+    return _result(model, grids, theta, weights, status, sol.success, sol.message, problem.nfev)
+
+
+def _merge(part: np.ndarray, full: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    out = full.copy()
+    out[mask] = part
+    return out
+
+
+def _failed(model: ThermalModel, grids, start, status: str, message: str) -> ThermalFit:
+    measured = np.concatenate([g.measured_c for g in grids])
+    return ThermalFit(model.name, dict(start), {}, measured.copy(), np.zeros_like(measured), False, status, message,
+                      np.concatenate([g.time_s for g in grids]), terms=model.terms,
+                      recordings=tuple(g.name for g in grids), sample_counts=tuple(len(g) for g in grids),
+                      nodes=model.nodes)
+
+
+def _result(model: ThermalModel, grids, theta, weights, status, success, message, nfev) -> ThermalFit:
+    keys, p = model.keys, len(model.keys)
+    values, _ = _from_theta(keys, theta[:p])
+    offsets = theta[p:] * _OFFSET_SCALE_C
+    sims = [model.simulate(g, values, offsets[r]) for r, g in enumerate(grids)]
+    fitted = np.concatenate([s[1] for s in sims])
+    measured = np.concatenate([g.measured_c for g in grids])
+    residuals = measured - fitted
+    w = np.concatenate(weights)
+    used = w > 0
+    jac = np.zeros((residuals.size, p + len(grids)))
+    row = 0
+    for r, (g, s) in enumerate(zip(grids, sims)):
+        jac[row:row + len(g), :p] = s[2][:, :p]
+        jac[row:row + len(g), p + r] = s[2][:, p]
+        row += len(g)
+    names = list(keys) + [f"initial_offset_c[{g.name}]" for g in grids]
+    seen_cols = [True] * p + [bool(np.any(w_r)) for w_r in weights]
+    names = [n for n, s in zip(names, seen_cols) if s]
+    jac_used = jac[used][:, seen_cols]
+    full_values = np.concatenate([values, offsets])[seen_cols]
+    base = result_from_jacobian(model.name, names, full_values, w[used] * residuals[used],
+                                w[used, None] * jac_used, fitted=fitted[used], units=UNITS)
+    parameters = {k: float(v) for k, v in zip(keys, values)} | model.fixed
+    inflation = math.sqrt(max(integrated_autocorrelation(r_g[w_g > 0]) for r_g, w_g in
+                              zip(np.split(residuals, np.cumsum([len(g) for g in grids])[:-1]), weights)
+                              if np.any(w_g > 0)))
+    stderr = {k: inflation * base.stderr[k] for k in keys if k in base.stderr}
+    ok = bool(success) and base.success and bool(np.all(np.isfinite(residuals)))
+    if success and not base.success:
+        status, message = base.status, base.message
+    notes = (f"standard errors inflated x{inflation:.2f} = sqrt(integrated autocorrelation time of the residual) "
+             "for autocorrelated output-error residuals; still linearised, local intervals",
+             "initial offsets [K]: " + ", ".join(f"{g.name} {o:+.3f}" for g, o in zip(grids, offsets)))
+    if model.fixed:
+        notes += ("held at the parameter file's values (not identifiable from the casing sensor alone): "
+                  + ", ".join(model.fixed),)
+    return ThermalFit(model.name, parameters, stderr, residuals, fitted, ok, status, str(message),
+                      np.concatenate([g.time_s for g in grids]), {k: UNITS[k] for k in keys}, notes,
+                      terms=model.terms, recordings=tuple(g.name for g in grids),
+                      sample_counts=tuple(len(g) for g in grids),
+                      initial_offset_c={g.name: float(o) for g, o in zip(grids, offsets)},
+                      stderr_inflation=inflation, nodes=model.nodes,
+                      node_temperatures_c=tuple(s[0] for s in sims), nfev=nfev)
+
+
+# ----------------------------------------------------------------------------- public API
+def load_joint_parameters(parameters: JointParameters | str | Path | None) -> JointParameters:
+    if isinstance(parameters, JointParameters):
+        return parameters
+    return load_parameters(parameters if parameters is not None else DEFAULT_PARAMETER_FILE)
+
+
+def as_recordings(recordings) -> list[Recording]:
+    """Recording objects or CSV paths (one or a sequence) -> validated, distinctly named recordings."""
+    recordings = [recordings] if isinstance(recordings, (Recording, str, Path)) else list(recordings)
+    recordings = [r if isinstance(r, Recording) else read_recording(r) for r in recordings]
+    if not recordings:
+        raise InputError("thermal", "recordings", "none", "give at least one recording")
+    names = [r.name for r in recordings]
+    if len(set(names)) != len(names):
+        raise InputError("thermal", "recordings", ", ".join(names), "recording names must be distinct")
+    return recordings
+
+
+def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
+    """Keys held at the parameter file's values by default: with only the casing measured, the drive's
+    path to ambient and its current-dependent loss trade off against its idle heat and coupling."""
+    return DRIVE_FIXED if "drive_heating" in terms else ()
+
+
+def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),
+                     parameters: JointParameters | str | Path | None = None,
+                     settings: ThermalSettings | None = None, start: Mapping[str, float] | None = None,
+                     fixed: Sequence[str] | None = None) -> ThermalFit:
+    """Fit ``model`` (+ ``terms``) to one or several recordings (CSV paths or Recording objects) with
+    shared parameters and per-recording initial states.  Fixed values (motor, ambient when the
+    recording has no ``ambient_c``) and start values come from ``parameters`` (default: the elbow file);
+    ``fixed`` names free keys to hold at their start values (default :func:`default_fixed`)."""
+    settings = settings or ThermalSettings()
+    params = load_joint_parameters(parameters)
+    recs = as_recordings(recordings)
+    terms = canonical_terms(model, terms)
+    values = start_values(params, terms) | dict(start or {})
+    fixed = default_fixed(terms) if fixed is None else tuple(fixed)
+    for key in fixed:
+        require(key in values, "identify_thermal", "fixed", key, f"not a parameter of {structure_name(terms)}")
+    structure = ThermalModel(params, terms, {k: values[k] for k in fixed})
+    start = values
+    grids = [thermal_grid(r, params, settings) for r in recs]
+    return fit_grids(structure, grids, start=start, settings=settings)
+
+
+def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = ()) -> dict:
+    """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict).
+    ``iron_losses`` has no contract key: its value is recorded in [sources] only."""
+    data = params.to_dict()
+    values = dict(fit.parameters)
+    thermal = {"model": network_model(fit.terms), "ambient_c": params.thermal.ambient_c}
+    thermal |= {k: values[k] for k in _NODE_KEYS[thermal["model"]]}
+    thermal["friction_heating_fraction"] = values.get("friction_heating_fraction", 0.0)
+    data["thermal"] = thermal
+    if "copper_alpha_per_k" in values:
+        data["motor"]["copper_alpha_per_k"] = values["copper_alpha_per_k"]
+    where = ", ".join(recordings) or "recordings"
+    data["sources"] = {k: v for k, v in data["sources"].items() if k not in thermal and k not in values}
+    for key in list(thermal)[2:] + [k for k in ("copper_alpha_per_k",) if k in values]:
+        data["sources"][key] = f"identified by thermo-ddp ({fit.model}, output-error least squares) from {where}"
+    if IRON_KEY in values:
+        data["sources"][IRON_KEY] = (f"identified {values[IRON_KEY]:.4g} W s^2/rad^2 (iron loss k v^2): no contract key, "
+                                     "not used by the planner")
+    return parameters_from_dict(data, f"identified from {where}").to_dict()
+
+
+def identify_thermal_files(paths: Sequence[str | Path], model: str = "one_node", *,
+                           parameters: JointParameters | str | Path | None = None) -> dict:
+    """CLI entry (``thermo-ddp identify --physics thermal``): CSV paths -> a JSON-ready dict."""
+    params = load_joint_parameters(parameters)
+    fit = identify_thermal([Path(p) for p in paths], model, parameters=params)
+    return {"physics": "thermal", "recordings": list(fit.recordings), **fit.summary(),
+            "stderr": dict(fit.stderr), "confidence_95": {k: list(v) for k, v in fit.confidence.items()},
+            "initial_offset_c": dict(fit.initial_offset_c), "n_samples": fit.n_samples,
+            "success": fit.success, "status": fit.status, "message": fit.message,
+            "parameter_file": parameter_file(params, fit, fit.recordings) if fit.success else None}
