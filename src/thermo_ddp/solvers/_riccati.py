@@ -1,0 +1,243 @@
+"""One knot of the DDP backward pass, written once for CasADi SX (compiled, mapaccum) and numpy.
+
+Notation (multiple shooting, crocoddyl-FDDP-like): the linearised dynamics around the current
+iterate are dx' = A dx + B du + c with the gap c = f(x_k, u_k, p_k) - x_{k+1}. The value
+gradient is carried in two parts, Vx = a + b: ``a`` collects the cost-gradient terms, ``b``
+the terms proportional to the step (gaps and feedforward). With the policy du = alpha k + K dx
+and gaps closed by a fraction alpha, the quadratic model of the cost change is exactly
+alpha*d1 + 0.5*alpha^2*d2 (for a linear-quadratic problem), with
+d1 = sum a'c + Qu0'k and d2 = sum 2b'c + c'Vxx c + 2 (B'(b + Vxx c))'k + k'Quu k.
+
+Control bounds: box-QP per knot by projected Newton (Bertsekas 1982; as in Box-DDP, Tassa,
+Mansard, Todorov, ICRA 2014): clip the unconstrained Newton step, then ``box_iterations``
+Newton steps on the free set; feedback rows of clamped controls are zero.
+Exact for one control in a single pass.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+EPS_BOUND = 1e-12
+
+
+class SymOps:
+    """Symbolic operations (CasADi SX or MX); linear solves by an unrolled LDL^T factorisation."""
+
+    @staticmethod
+    def eye(n):
+        return ca.DM.eye(n)
+
+    @staticmethod
+    def diag(v):
+        return ca.diag(v)
+
+    @staticmethod
+    def le(a, b):
+        return a <= b
+
+    @staticmethod
+    def gt(a, b):
+        return a > b
+
+    @staticmethod
+    def clip(v, lo, hi):
+        return ca.fmin(ca.fmax(v, lo), hi)
+
+    @staticmethod
+    def hcat(v, m):
+        return ca.horzcat(v, m)
+
+    @staticmethod
+    def fmin(a, b):
+        return ca.fmin(a, b)
+
+    @staticmethod
+    def max_abs(v):
+        return ca.mmax(ca.fabs(v)) if v.numel() else ca.DM(0)
+
+    @staticmethod
+    def sym(m):
+        return 0.5 * (m + m.T)
+
+    @staticmethod
+    def solve(H, rhs):
+        """Solve H X = rhs by LDL^T without pivoting; also return the smallest pivot."""
+        n = H.shape[0]
+        L = [[None] * n for _ in range(n)]
+        d = []
+        for j in range(n):
+            dj = H[j, j] - sum(L[j][m] ** 2 * d[m] for m in range(j))
+            d.append(dj)
+            for i in range(j + 1, n):
+                L[i][j] = (H[i, j] - sum(L[i][m] * L[j][m] * d[m] for m in range(j))) / dj
+        y = []
+        for i in range(n):
+            y.append(rhs[i, :] - sum(L[i][m] * y[m] for m in range(i)))
+        x = [None] * n
+        for i in reversed(range(n)):
+            x[i] = y[i] / d[i] - sum(L[m][i] * x[m] for m in range(i + 1, n))
+        min_pivot = d[0]
+        for dj in d[1:]:
+            min_pivot = ca.fmin(min_pivot, dj)
+        return ca.vertcat(*x), min_pivot
+
+
+class NumpyOps:
+    """The same operations on numpy arrays (vectors are 1-D)."""
+
+    @staticmethod
+    def eye(n):
+        return np.eye(n)
+
+    @staticmethod
+    def diag(v):
+        return np.diag(v)
+
+    @staticmethod
+    def le(a, b):
+        return (a <= b).astype(float)
+
+    @staticmethod
+    def gt(a, b):
+        return (a > b).astype(float)
+
+    @staticmethod
+    def clip(v, lo, hi):
+        return np.minimum(np.maximum(v, lo), hi)
+
+    @staticmethod
+    def hcat(v, m):
+        return np.column_stack([v, m])
+
+    @staticmethod
+    def fmin(a, b):
+        return np.minimum(a, b)
+
+    @staticmethod
+    def max_abs(v):
+        return float(np.max(np.abs(v))) if v.size else 0.0
+
+    @staticmethod
+    def sym(m):
+        return 0.5 * (m + m.T)
+
+    @staticmethod
+    def solve(H, rhs):
+        try:
+            L = np.linalg.cholesky(H)
+        except np.linalg.LinAlgError:
+            return np.zeros_like(rhs), -1.0
+        x = np.linalg.solve(L.T, np.linalg.solve(L, rhs))
+        return x, float(np.min(np.diag(L)) ** 2)
+
+
+def _clamped(ops, du, grad, lo, hi):
+    at_lo = ops.le(du, lo + EPS_BOUND) * ops.gt(grad, 0)
+    at_hi = ops.le(hi - EPS_BOUND, du) * ops.gt(-grad, 0)
+    return ops.fmin(at_lo + at_hi, 1)
+
+
+def _box_qp(ops, H, g, Hux, lo, hi, iterations):
+    """min 0.5 du'H du + g'du, lo <= du <= hi; returns du, feedback gain, min pivot of H."""
+    sol, pivot = ops.solve(H, ops.hcat(-g, -Hux))
+    du = ops.clip(sol[:, 0], lo, hi)
+    for _ in range(iterations):
+        du = _free_newton(ops, H, g, Hux, du, lo, hi)[0]
+    return du, _free_newton(ops, H, g, Hux, du, lo, hi)[1], pivot
+
+
+def _free_newton(ops, H, g, Hux, du, lo, hi):
+    """Newton step on the controls not clamped at du; clamped rows get zero feedback."""
+    clamped = _clamped(ops, du, g + H @ du, lo, hi)
+    M = ops.diag(1 - clamped)
+    fixed = clamped * du
+    Hm = M @ H @ M + ops.eye(H.shape[0]) - M
+    sol, _ = ops.solve(Hm, ops.hcat(-(M @ (g + H @ fixed)), -(M @ Hux)))
+    return ops.clip(M @ sol[:, 0] + fixed, lo, hi), sol[:, 1:]
+
+
+def backward_step(ops, model, a, b, Vxx, c, u, lb, ub, reg, box_iterations, has_box):
+    """One knot of the backward pass.
+
+    ``model`` holds A, B, lx, lu, lxx, luu, lux at the knot and, for full DDP, a callable
+    ``second_order(v)`` returning (Hxx, Huu, Hux) of v'f. Returns a dict with the value
+    parts a, b, Vxx at this knot, the policy k, K, the smallest pivot of the regularised Quu,
+    this knot's d1, d2 terms and the projected stationarity |Qu0| of the controls.
+    """
+    A, B = model["A"], model["B"]
+    Vc = Vxx @ c
+    w = b + Vc
+    v = a + w
+    Qx0, Qu0 = model["lx"] + A.T @ a, model["lu"] + B.T @ a
+    Qxx = model["lxx"] + A.T @ Vxx @ A
+    Quu = model["luu"] + B.T @ Vxx @ B
+    Qux = model["lux"] + B.T @ Vxx @ A
+    if model.get("second_order") is not None:
+        Hxx, Huu, Hux = model["second_order"](v)
+        Qxx, Quu, Qux = Qxx + Hxx, Quu + Huu, Qux + Hux
+    Qu = Qu0 + B.T @ w
+    nu = Quu.shape[0]
+    H = ops.sym(Quu) + reg * ops.eye(nu)
+    if has_box:
+        k, K, pivot = _box_qp(ops, H, Qu, Qux, lb - u, ub - u, box_iterations)
+    else:
+        sol, pivot = ops.solve(H, ops.hcat(-Qu, -Qux))
+        k, K = sol[:, 0], sol[:, 1:]
+    KtQuu = K.T @ Quu
+    a_new = Qx0 + K.T @ Qu0
+    b_new = A.T @ w + K.T @ (B.T @ w) + KtQuu @ k + Qux.T @ k
+    Vxx_new = ops.sym(Qxx + KtQuu @ K + K.T @ Qux + Qux.T @ K)
+    d1 = a.T @ c + Qu0.T @ k
+    d2 = 2 * (b.T @ c) + c.T @ Vc + 2 * ((B.T @ w).T @ k) + k.T @ Quu @ k
+    stationarity = ops.max_abs(_projected(ops, Qu0, u, lb, ub)) if has_box else ops.max_abs(Qu0)
+    return {"a": a_new, "b": b_new, "Vxx": Vxx_new, "k": k, "K": K, "pivot": pivot,
+            "d1": d1, "d2": d2, "stationarity": stationarity}
+
+
+def _projected(ops, grad, u, lb, ub):
+    """Gradient with the components pushing against an active bound removed."""
+    at_lo = ops.le(u, lb + EPS_BOUND) * ops.gt(grad, 0)
+    at_hi = ops.le(ub - EPS_BOUND, u) * ops.gt(-grad, 0)
+    return grad * (1 - ops.fmin(at_lo + at_hi, 1))
+
+
+def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False):
+    """Symbolic local model of the augmented-Lagrangian cost (and dynamics) at one knot.
+
+    Cost 0.5|r|^2 + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho) (PHR augmented Lagrangian
+    for g <= 0). Gauss-Newton Hessians J'J and rho Jg' diag(active) Jg; with ``full`` the
+    exact Hessians (plus the residual and multiplier curvature terms).
+    """
+    z = x if terminal else ca.vertcat(x, u)
+    if terminal:
+        r, g = F.terminal_residual(x, p), F.terminal_constraint(x, p)
+    else:
+        r, g = F.stage_residual(x, u, p), F.stage_constraint(x, u, p)
+    Jr = ca.jacobian(r, z)
+    grad = Jr.T @ r
+    hess = ca.hessian(0.5 * ca.sumsqr(r), z)[0] if full else Jr.T @ Jr
+    if g.numel():
+        Jg = ca.jacobian(g, z)
+        mult = ca.fmax(0, lam + rho * g)
+        active = lam + rho * g > 0
+        grad += Jg.T @ mult
+        hess += rho * Jg.T @ ca.diag(active) @ Jg
+        if full:
+            mu = type(x).sym("mu", g.numel())
+            hess += ca.substitute(ca.hessian(ca.dot(mu, g), z)[0], mu, mult)
+    nx = x.numel()
+    out = {"lx": grad[:nx], "lxx": hess[:nx, :nx]}
+    if not terminal:
+        out.update(lu=grad[nx:], luu=hess[nx:, nx:], lux=hess[nx:, :nx])
+        f = F.step(x, u, p)
+        if F.step_jacobians is not None:  # the model's own (e.g. analytic) derivatives
+            out.update(zip(("A", "B"), F.step_jacobians(x, u, p)))
+        else:
+            Jf = ca.jacobian(f, z)  # one AD pass for [A B]
+            out.update(A=Jf[:, :nx], B=Jf[:, nx:])
+        if full:
+            v = type(x).sym("v", nx)
+            Hf = ca.hessian(ca.dot(v, f), z)[0]
+            out["second_order_sym"] = (v, Hf[:nx, :nx], Hf[nx:, nx:], Hf[nx:, :nx])
+    return out

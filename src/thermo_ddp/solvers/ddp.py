@@ -1,0 +1,328 @@
+"""Constrained multiple-shooting DDP / iLQR with an augmented Lagrangian.
+
+Method (each part stated, as logged):
+- Local model: Gauss-Newton iLQR (cost Hessian J'J, no dynamics curvature) by default;
+  ``full_second_order`` uses exact cost Hessians and the dynamics tensor contracted with the
+  value gradient (full DDP).
+- Multiple shooting with gaps (feasibility-driven, as crocoddyl FDDP, Mastalli et al. ICRA
+  2020): the backward pass uses Vx' + Vxx' c with the gap c = f(x_k,u_k) - x_{k+1}; the
+  forward pass closes a fraction alpha of every gap, so an infeasible warm start is accepted
+  and a full step yields a dynamically feasible trajectory. x_0 is set to x0 before the first
+  iteration.
+- Control box: box-QP per knot by projected Newton (see _riccati), forward pass clamps.
+- Inequalities g <= 0 (stage and terminal): PHR augmented Lagrangian (as ALTRO, Howell et al.
+  IROS 2019): inner DDP iterations on cost + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho);
+  when the inner stationarity is below the current inner tolerance, multipliers are updated
+  lam <- max(0, lam + rho g) and rho grows by ``penalty_factor`` when the violation did not
+  fall to a quarter.
+- Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
+  Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
+  mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
+- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed backward
+  pass (non-positive pivot) or line search, and in Gauss-Newton mode also after a step
+  shorter than 1/2 (Levenberg-Marquardt-like damping of a too optimistic model); divided
+  after a full step.
+- Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
+  no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
+  progress is possible above rounding), the largest gap <= ``gap_tolerance`` and
+  |max(g, -lam/rho)|_inf <= ``constraint_tolerance``.
+- Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result
+  (WarmStart.from_result shifts them); with multipliers the inner tolerance starts at
+  ``tolerance``. Measured: Gauss-Newton converges slowly when a heating term R(T) i^2 is
+  constrained (its curvature is in the dynamics); use ``full_second_order=True`` there.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from typing import Mapping
+
+import numpy as np
+
+from .._config import require, settings_from_mapping
+from ..errors import InputError
+from ..ocp import OptimalControlProblem
+from ._backends import Layout, make_backend
+from .result import HISTORY_KEYS, SolverResult, WarmStart, constraint_violation
+
+log = logging.getLogger(__name__)
+
+BACKENDS = ("codegen", "casadi", "numpy")
+_SRC = "DDPSettings"
+
+
+@dataclasses.dataclass(frozen=True)
+class DDPSettings:
+    """Options of DDPSolver (frozen, validated; unknown keys in from_mapping raise)."""
+
+    max_iterations: int = 200
+    tolerance: float = 1e-6                 # projected |Qu|_inf at convergence
+    gap_tolerance: float = 1e-8             # largest dynamics gap at convergence
+    constraint_tolerance: float = 1e-6      # |max(g, -lam/rho)|_inf at convergence
+    decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|)
+    inner_tolerance_init: float = 1e-2      # first inner tolerance of the AL loop
+    inner_tolerance_factor: float = 0.1     # inner tolerance shrink per multiplier update
+    full_second_order: bool = False         # full DDP (True) or Gauss-Newton iLQR (False)
+    reg_init: float = 0.0                   # Quu regularisation at the start of a solve
+    reg_min: float = 1e-9                   # smallest non-zero regularisation
+    reg_max: float = 1e9
+    reg_factor: float = 10.0
+    line_search_factor: float = 0.5
+    line_search_min_step: float = 1e-4
+    armijo: float = 1e-4                    # fraction of the model decrease required
+    penalty_init: float = 100.0             # AL penalty rho at a cold start
+    penalty_factor: float = 10.0
+    penalty_max: float = 1e8
+    box_iterations: int = 2                 # projected-Newton passes per knot (nu > 1)
+    backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
+    compiler_flags: tuple = ("-O2", "-march=native")  # gcc; 2-3x faster code than -O1 for the 7-DOF arm
+
+    def __post_init__(self):
+        ints = ("max_iterations", "box_iterations")
+        for name in ints:
+            v = getattr(self, name)
+            require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
+                    "expected an integer >= 0")
+        positive = ("tolerance", "decrement_tolerance", "gap_tolerance", "constraint_tolerance",
+                    "inner_tolerance_init", "reg_max",
+                    "reg_factor", "penalty_init", "penalty_factor", "penalty_max", "line_search_min_step")
+        for name in positive:
+            v = getattr(self, name)
+            require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0,
+                    _SRC, name, v, "expected a finite number > 0")
+        for name in ("reg_init", "reg_min"):
+            v = getattr(self, name)
+            require(isinstance(v, (int, float)) and np.isfinite(v) and v >= 0, _SRC, name, v, "expected a number >= 0")
+        for name in ("line_search_factor", "armijo", "inner_tolerance_factor"):
+            v = getattr(self, name)
+            require(isinstance(v, (int, float)) and 0 < v < 1, _SRC, name, v, "expected a number in (0, 1)")
+        require(self.reg_factor > 1 and self.penalty_factor >= 1, _SRC, "reg_factor/penalty_factor",
+                (self.reg_factor, self.penalty_factor), "expected reg_factor > 1 and penalty_factor >= 1")
+        require(self.reg_init <= self.reg_max and self.reg_min <= self.reg_max, _SRC, "reg_init/reg_min",
+                (self.reg_init, self.reg_min), "expected reg_init <= reg_max and reg_min <= reg_max")
+        require(self.penalty_init <= self.penalty_max, _SRC, "penalty_init", self.penalty_init,
+                "expected <= penalty_max")
+        require(isinstance(self.full_second_order, bool), _SRC, "full_second_order", self.full_second_order,
+                "expected True or False")
+        require(self.backend in BACKENDS, _SRC, "backend", self.backend, f"expected one of {', '.join(BACKENDS)}")
+        require(isinstance(self.compiler_flags, (tuple, list)) and all(isinstance(f, str) for f in self.compiler_flags),
+                _SRC, "compiler_flags", self.compiler_flags, "expected a tuple of strings")
+        object.__setattr__(self, "compiler_flags", tuple(self.compiler_flags))
+
+    @classmethod
+    def from_mapping(cls, values: Mapping, source: str = _SRC) -> "DDPSettings":
+        return settings_from_mapping(cls, values, source)
+
+
+@dataclasses.dataclass
+class _Iterate:
+    """The accepted trajectory and its evaluations (solver workspace, never returned)."""
+
+    X: np.ndarray
+    U: np.ndarray
+    J: float
+    G: np.ndarray
+    GN: np.ndarray
+    C: np.ndarray
+
+
+class DDPSolver:
+    """Build once (all code generation and compilation here), then ``solve`` many times."""
+
+    def __init__(self, problem: OptimalControlProblem, settings: DDPSettings | Mapping | None = None):
+        if not isinstance(problem, OptimalControlProblem):
+            raise InputError("DDPSolver", "problem", type(problem).__name__, "expected an OptimalControlProblem")
+        if settings is None:
+            settings = DDPSettings()
+        elif isinstance(settings, Mapping):
+            settings = DDPSettings.from_mapping(settings)
+        elif not isinstance(settings, DDPSettings):
+            raise InputError("DDPSolver", "settings", type(settings).__name__, "expected DDPSettings or a mapping")
+        self.problem, self.settings = problem, settings
+        self.layout = Layout(problem.nx, problem.nu)
+        start = time.perf_counter()
+        self.backend = make_backend(problem, settings, self.layout)
+        self.build_s = time.perf_counter() - start
+        log.info("DDP built for %s (nx=%d nu=%d N=%d) in %.2f s: backend %s, %s, multiple shooting (gaps), "
+                 "box-QP by projected Newton, PHR augmented Lagrangian for %d+%d inequalities, Armijo backtracking "
+                 "on cost + AL + mu|gaps|_1, Quu regularisation x%g, stop at |Qu| <= %g, gaps <= %g, "
+                 "constraints <= %g", problem.name, problem.nx, problem.nu, problem.horizon, self.build_s,
+                 self.backend.name, "full DDP" if settings.full_second_order else "Gauss-Newton iLQR",
+                 problem.n_constraints, problem.n_terminal_constraints, settings.reg_factor, settings.tolerance,
+                 settings.gap_tolerance, settings.constraint_tolerance)
+
+    # -- public ---------------------------------------------------------------------------------
+    def solve(self, x0, params=None, warm_start: WarmStart | SolverResult | None = None) -> SolverResult:
+        """Solve from initial state x0 with per-knot params (N+1, np) and an optional warm start."""
+        pr = self.problem
+        x0 = pr.check_x0(x0, "DDPSolver.solve")
+        P = np.ascontiguousarray(pr.check_params(params, "DDPSolver.solve"))
+        X, U, lam, lamN, rho, cold = self._initial_guess(x0, warm_start)
+        start = time.perf_counter()
+        return self._run(X, U, P, lam, lamN, rho, cold, start)
+
+    # -- internals ------------------------------------------------------------------------------
+    def _initial_guess(self, x0, warm):
+        pr, s = self.problem, self.settings
+        N, ng, ngN = pr.horizon, pr.n_constraints, pr.n_terminal_constraints
+        lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), s.penalty_init, True
+        if warm is None:
+            xs, us = np.tile(x0, (N + 1, 1)), np.zeros((N, pr.nu))
+        else:
+            if isinstance(warm, SolverResult):
+                warm = WarmStart(warm.xs, warm.us, warm.multipliers)
+            if not isinstance(warm, WarmStart):
+                raise InputError("DDPSolver.solve", "warm_start", type(warm).__name__,
+                                 "expected a WarmStart or SolverResult")
+            xs, us = pr.check_trajectory(warm.xs, warm.us)
+            m = warm.multipliers
+            if m.get("constraints") is not None and np.shape(m["constraints"]) == (N, ng):
+                lam, cold = np.maximum(np.asarray(m["constraints"], float), 0.0), False
+            if m.get("terminal_constraints") is not None and np.shape(m["terminal_constraints"]) == (ngN,):
+                lamN = np.maximum(np.asarray(m["terminal_constraints"], float), 0.0)
+            if m.get("penalty") is not None:
+                rho = float(np.clip(m["penalty"], s.penalty_init, s.penalty_max))
+        X = np.array(xs, dtype=float)
+        X[0] = x0
+        U = np.ascontiguousarray(np.clip(us, pr.u_lb, pr.u_ub))
+        return X, U, lam, lamN, rho, cold
+
+    def _al(self, G, GN, lam, lamN, rho) -> float:
+        """Augmented-Lagrangian terms sum (max(0, lam + rho g)^2 - lam^2) / (2 rho)."""
+        return float((np.sum(np.maximum(0.0, lam + rho * G) ** 2 - lam ** 2)
+                      + np.sum(np.maximum(0.0, lamN + rho * GN) ** 2 - lamN ** 2)) / (2 * rho))
+
+    @staticmethod
+    def _kkt_constraint(G, GN, lam, lamN, rho) -> float:
+        vals = [np.max(np.abs(np.maximum(G, -lam / rho)))] if G.size else [0.0]
+        if GN.size:
+            vals.append(np.max(np.abs(np.maximum(GN, -lamN / rho))))
+        return float(max(vals))
+
+    def _run(self, X, U, P, lam, lamN, rho, cold, start) -> SolverResult:
+        s, pr, be = self.settings, self.problem, self.backend
+        has_constraints = pr.n_constraints + pr.n_terminal_constraints > 0
+        it_ = _Iterate(X, U, *be.evaluate(X, U, P))
+        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
+            return self._result(it_, lam, lamN, rho, None, "numerical_error",
+                                "the model gives non-finite values at the initial guess", 0, start,
+                                {k: [] for k in HISTORY_KEYS})
+        reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
+        viol_prev = np.inf
+        hist = {k: [] for k in HISTORY_KEYS}
+        status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
+        policy = values = None
+        iteration = passes = 0
+        while iteration < s.max_iterations and passes < 4 * s.max_iterations + 20:
+            passes += 1
+            policy_try, summary, values_try = be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
+            d1, d2, stat, pivot = summary
+            if not (pivot > 0 and np.all(np.isfinite(summary))):
+                reg = self._increase(reg)
+                log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", iteration, pivot, reg)
+                if reg > s.reg_max:
+                    status, message = "regularisation_failed", "Quu not positive definite up to reg_max"
+                    break
+                continue
+            policy, values = policy_try, values_try
+            gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
+            kkt_c = self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho)
+            flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)) and reg <= s.reg_min
+            if (stat <= omega or flat) and gap <= s.gap_tolerance:
+                if (stat <= s.tolerance or flat) and kkt_c <= s.constraint_tolerance:
+                    status = "converged"
+                    message = ("predicted decrease below rounding" if stat > s.tolerance else "stationarity") + \
+                        ", gaps and constraints within tolerance"
+                    self._record(hist, it_, lam, lamN, rho, stat, gap, 0.0, reg, 0.0)
+                    break
+                omega = max(s.tolerance, omega * s.inner_tolerance_factor)
+                if has_constraints and kkt_c > s.constraint_tolerance:
+                    lam, lamN, rho, viol_prev = self._update_multipliers(it_, lam, lamN, rho, viol_prev)
+                    continue
+            alpha, trial, mu_gap = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
+            if trial is None:
+                reg = self._increase(reg)
+                log.debug("iteration %d: line search failed, reg -> %.1e", iteration, reg)
+                if reg > s.reg_max:
+                    status, message = "line_search_failed", "no acceptable step up to reg_max"
+                    break
+                continue
+            iteration += 1
+            step = alpha * float(np.max(np.abs(policy[:, : pr.nu])))
+            it_ = trial
+            if alpha == 1.0:
+                reg = reg / s.reg_factor if reg / s.reg_factor >= s.reg_min else 0.0
+            elif alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
+                reg = self._increase(reg)
+            self._record(hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha)
+            log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", iteration, it_.J,
+                      stat, gap, alpha, reg, rho)
+        lam_out = np.maximum(0.0, lam + rho * it_.G)
+        lamN_out = np.maximum(0.0, lamN + rho * it_.GN)
+        return self._result(it_, lam_out, lamN_out, rho, (policy, values), status, message, iteration, start,
+                            hist, passes)
+
+    def _increase(self, reg: float) -> float:
+        return max(reg * self.settings.reg_factor, self.settings.reg_min)
+
+    def _update_multipliers(self, it_, lam, lamN, rho, viol_prev):
+        s = self.settings
+        viol = max(float(np.max(it_.G, initial=0.0)), float(np.max(it_.GN, initial=0.0)))
+        lam = np.maximum(0.0, lam + rho * it_.G)
+        lamN = np.maximum(0.0, lamN + rho * it_.GN)
+        if viol > 0.25 * viol_prev:
+            rho = min(rho * s.penalty_factor, s.penalty_max)
+        log.debug("multiplier update: violation %.2e, rho %.1e", viol, rho)
+        return lam, lamN, rho, viol
+
+    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap):
+        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty)."""
+        s, be = self.settings, self.backend
+        gap_l1 = float(np.sum(np.abs(it_.C)))
+        if gap_l1 > 0:
+            need = (d1 + 0.5 * max(d2, 0.0)) / (0.9 * gap_l1)
+            mu_gap = max(mu_gap, need + 1e-8)
+        merit0 = it_.J + self._al(it_.G, it_.GN, lam, lamN, rho) + mu_gap * gap_l1
+        noise = 1e-13 * (1.0 + abs(merit0))
+        alpha = 1.0
+        while alpha >= s.line_search_min_step:
+            X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
+            if np.isfinite(J) and np.all(np.isfinite(X)):
+                merit = J + self._al(G, GN, lam, lamN, rho) + mu_gap * (1 - alpha) * gap_l1
+                model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
+                if merit - merit0 <= s.armijo * min(model, 0.0) + noise:
+                    C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
+                    return alpha, _Iterate(X, U, J, G, GN, C), mu_gap
+            alpha *= s.line_search_factor
+        return alpha, None, mu_gap
+
+    def _record(self, hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha):
+        viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, self.problem.u_lb, self.problem.u_ub)
+        for key, value in (("cost", it_.J), ("merit", it_.J + self._al(it_.G, it_.GN, lam, lamN, rho)),
+                           ("violation", viol), ("gap", gap), ("stationarity", stat), ("step", step),
+                           ("reg", reg), ("alpha", alpha), ("penalty", rho)):
+            hist[key].append(float(value))
+
+    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist, passes=0) -> SolverResult:
+        pr = self.problem
+        solve_s = time.perf_counter() - start
+        viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
+        K = k = None
+        mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho}
+        if pol is not None and pol[0] is not None:
+            k, K = self.layout.gains(pol[0])
+            mult["dynamics"] = self.layout.costates(pol[1])[1:]
+        finite = bool(np.all(np.isfinite(it_.X)) and np.all(np.isfinite(it_.U)) and np.isfinite(it_.J))
+        if not finite and status != "numerical_error":
+            status, message = "numerical_error", "non-finite iterate"
+        viol = viol if np.isfinite(viol) else float("inf")
+        success = status == "converged"
+        log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", status, iterations, it_.J,
+                 viol, 1e3 * solve_s)
+        return SolverResult(solver=f"ddp[{self.backend.name}]", success=success, status=status, message=message,
+                            xs=it_.X.copy(), us=it_.U.copy(), cost=float(it_.J) if finite else float("inf"),
+                            max_constraint_violation=viol,
+                            iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
+                            info={"backend": self.backend.name, "backward_passes": passes,
+                                  "full_second_order": self.settings.full_second_order})

@@ -1,0 +1,102 @@
+"""Solver results (kept apart from any solver's workspace) and warm starts."""
+from __future__ import annotations
+
+import dataclasses
+import io
+from typing import Any
+
+import numpy as np
+
+HISTORY_KEYS = ("cost", "merit", "violation", "gap", "stationarity", "step", "reg", "alpha", "penalty")
+
+
+@dataclasses.dataclass
+class SolverResult:
+    """Outcome of one solve, scipy.optimize.OptimizeResult-like.
+
+    ``xs`` (N+1, nx), ``us`` (N, nu). ``K`` (N, nu, nx) and ``k`` (N, nu) are the DDP
+    feedback and feedforward terms of the last backward pass (None for IPOPT/fatrop).
+    ``cost`` is the objective without any penalty terms. ``max_constraint_violation`` is the
+    largest of: inequality violation max(g, 0), control-bound violation and dynamics gap.
+    ``multipliers`` maps names to arrays ("constraints" (N, ng), "terminal_constraints"
+    (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts).
+    ``history`` maps HISTORY_KEYS to one value per iteration (NaN where not defined).
+    Trajectories are never NaN: a failed solve returns its last finite iterate and says so.
+    """
+
+    solver: str
+    success: bool
+    status: str
+    message: str
+    xs: np.ndarray
+    us: np.ndarray
+    cost: float
+    max_constraint_violation: float
+    iterations: int
+    solve_s: float
+    K: np.ndarray | None = None
+    k: np.ndarray | None = None
+    multipliers: dict[str, Any] = dataclasses.field(default_factory=dict)
+    history: dict[str, list] = dataclasses.field(default_factory=dict)
+    info: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __getitem__(self, key):
+        return getattr(self, key)
+
+    def summary(self) -> dict:
+        """The plan JSON's "solver" entry: name, iterations, solve_s, cost, max_constraint_violation."""
+        return {"name": self.solver, "iterations": int(self.iterations), "solve_s": float(self.solve_s),
+                "cost": float(self.cost), "max_constraint_violation": float(self.max_constraint_violation)}
+
+    def report(self, print_out: bool = True) -> str:
+        """Verbose table of the iterations and a summary; printed unless print_out is False."""
+        out = io.StringIO()
+        out.write(f"{self.solver}: {self.status} ({'success' if self.success else 'FAILURE'}) - {self.message}\n")
+        keys = [k for k in HISTORY_KEYS if k in self.history]
+        if keys:
+            out.write(" iter " + "".join(f"{k:>13s}" for k in keys) + "\n")
+            for i in range(len(self.history[keys[0]])):
+                out.write(f"{i:5d} " + "".join(f"{self.history[k][i]:13.5e}" for k in keys) + "\n")
+        out.write(f"cost {self.cost:.10g}, max constraint violation {self.max_constraint_violation:.3e}, "
+                  f"iterations {self.iterations}, solve {1e3 * self.solve_s:.3f} ms\n")
+        for key, value in self.info.items():
+            out.write(f"{key}: {value}\n")
+        text = out.getvalue()
+        if print_out:
+            print(text, end="")
+        return text
+
+
+@dataclasses.dataclass(frozen=True)
+class WarmStart:
+    """Initial guess: trajectories and, for DDP, constraint multipliers and penalty."""
+
+    xs: np.ndarray
+    us: np.ndarray
+    multipliers: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @staticmethod
+    def from_result(result: SolverResult, shift: int = 0) -> "WarmStart":
+        """Warm start from a result, shifted by ``shift`` knots (last knot repeated), for MPC."""
+        def move(a):
+            a = np.asarray(a)
+            if shift == 0 or a.ndim == 0 or a.shape[0] <= 1:
+                return a.copy()
+            return np.concatenate([a[shift:], np.repeat(a[-1:], shift, axis=0)])
+
+        keep = ("constraints", "penalty", "terminal_constraints")
+        mult = {k: move(v) if k == "constraints" else np.array(v, copy=True)
+                for k, v in result.multipliers.items() if k in keep}
+        return WarmStart(move(result.xs), move(result.us), mult)
+
+
+def constraint_violation(g: np.ndarray, gN: np.ndarray, gaps: np.ndarray, us: np.ndarray,
+                         u_lb: np.ndarray, u_ub: np.ndarray) -> float:
+    """Largest violation of inequalities, control bounds and dynamics (all >= 0)."""
+    parts = [0.0]
+    for arr in (g, gN, us - u_ub, u_lb - us):
+        if arr.size:
+            parts.append(float(np.max(arr)))
+    if gaps.size:
+        parts.append(float(np.max(np.abs(gaps))))
+    return max(parts)

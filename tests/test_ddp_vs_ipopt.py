@@ -1,0 +1,145 @@
+"""DDP against IPOPT (and fatrop) on a small thermal pendulum resembling the elbow lift.
+
+Toy model (defined here, not the robot): a 1-DOF pendulum driven by a current u,
+torque = k u - m g l sin(q) - b v, and a one-node winding temperature
+C T' = R0 (1 + alpha (T - Ta)) u^2 - (T - Ta) / Rth. Constraints: T <= Tmax and the
+voltage |R(T) u + kb v| <= Vmax, box |u| <= umax. Goal: lift to the angle given as a
+per-knot parameter and hold.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from thermo_ddp.ocp import Constraint, Cost, OptimalControlProblem
+from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, FatropSolver, WarmStart
+
+# toy constants (SI); chosen so the limits bite within a 2 s horizon
+MASS, LENGTH, GRAV, DAMP = 1.0, 0.5, 9.81, 0.1
+INERTIA = MASS * LENGTH ** 2 + 0.05
+K_TORQUE, K_BEMF = 2.0, 2.0
+R0, ALPHA_CU, T_AMB, R_TH, CAP = 1.0, 0.00393, 25.0, 2.0, 0.5
+U_MAX, V_MAX = 4.0, 6.0
+
+
+def thermal_pendulum(horizon=100, dt=0.02, t_max=80.0, n_thermal=1):
+    """OCP of the toy; states [q, v, T_winding (, T_casing, T_drive)], control current u."""
+    nx = 2 + n_thermal
+    x, u, p = ca.SX.sym("x", nx), ca.SX.sym("u"), ca.SX.sym("p")
+    q, v, tw = x[0], x[1], x[2]
+    resistance = R0 * (1 + ALPHA_CU * (tw - T_AMB))
+    acc = (K_TORQUE * u - MASS * GRAV * LENGTH * ca.sin(q) - DAMP * v) / INERTIA
+    if n_thermal == 1:
+        temps = [(resistance * u ** 2 - (tw - T_AMB) / R_TH) / CAP]
+    else:  # winding -> casing -> ambient, drive heating the casing
+        tc, td = x[3], x[4]
+        temps = [(resistance * u ** 2 - (tw - tc) / 0.5) / CAP,
+                 ((tw - tc) / 0.5 + (td - tc) / 2.0 - (tc - T_AMB) / 1.5) / 20.0,
+                 (0.5 + 0.05 * u ** 2 - (td - tc) / 2.0) / 5.0]
+    ode = ca.Function("ode", [x, u], [ca.vertcat(v, acc, *temps)])
+    k1 = ode(x, u)
+    k2 = ode(x + dt / 2 * k1, u)
+    k3 = ode(x + dt / 2 * k2, u)
+    k4 = ode(x + dt * k3, u)
+    step = ca.Function("step", [x, u, p], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)], ["x", "u", "p"], ["x_next"])
+    voltage = resistance * u + K_BEMF * v
+    costs = [Cost("goal", 10.0, ca.Function("r", [x, u, p], [q - p], ["x", "u", "p"], ["r"])),
+             Cost("velocity", 0.1, ca.Function("r", [x, u, p], [v], ["x", "u", "p"], ["r"])),
+             Cost("current", 0.05, ca.Function("r", [x, u], [u], ["x", "u"], ["r"]))]
+    terminal = [Cost("goal_end", [100.0, 10.0], ca.Function("r", [x, p], [ca.vertcat(q - p, v)], ["x", "p"], ["r"]))]
+    constraints = [Constraint("winding", ca.Function("g", [x, u], [tw - t_max], ["x", "u"], ["g"])),
+                   Constraint("voltage", ca.Function("g", [x, u], [ca.vertcat(voltage - V_MAX, -voltage - V_MAX)],
+                                                     ["x", "u"], ["g"]))]
+    terminal_constraints = [Constraint("winding_end", ca.Function("g", [x, p], [tw - t_max], ["x", "p"], ["g"]))]
+    return OptimalControlProblem(step, horizon, costs, terminal, constraints, terminal_constraints,
+                                 u_lb=[-U_MAX], u_ub=[U_MAX], name="thermal_pendulum")
+
+
+def x0_of(n_thermal=1):
+    return np.array([0.0, 0.0] + [T_AMB + 5.0] * n_thermal)
+
+
+GOAL = np.minimum(np.linspace(0.0, 4.0, 101), 2.0)[:, None]  # ramp to 2 rad, then hold
+INACTIVE_C, ACTIVE_C = 50.0, 33.0
+
+
+@pytest.fixture(scope="module", params=[INACTIVE_C, ACTIVE_C], ids=["limit_inactive", "limit_active"])
+def case(request):
+    problem = thermal_pendulum(t_max=request.param)
+    reference = IpoptSolver(problem, {"tolerance": 1e-9}).solve(x0_of(), GOAL)
+    assert reference.success
+    return request.param, problem, reference
+
+
+def active_set(problem, result, tol=1e-5):
+    """Knots and rows where g >= -tol, from the constraint values of the result's trajectory."""
+    g = problem.functions.stage_constraint.map(problem.horizon)(result.xs[:-1].T, result.us.T, GOAL[:-1].T)
+    return np.asarray(g).T >= -tol
+
+
+def test_ddp_and_ipopt_reach_the_same_optimum(case):
+    t_max, problem, ref = case
+    res = DDPSolver(problem, DDPSettings(backend="casadi", full_second_order=True)).solve(x0_of(), GOAL)
+    assert res.success, res.message
+    assert abs(res.cost - ref.cost) <= 1e-4 * ref.cost
+    assert res.max_constraint_violation <= 1e-5
+    winding_limit_hit = ref.xs[:, 2].max() >= t_max - 1e-6
+    assert winding_limit_hit == (t_max == ACTIVE_C)
+    assert np.array_equal(active_set(problem, res, 1e-4), active_set(problem, ref, 1e-4))
+    voltage_active = ref.multipliers["constraints"][:, 1:] > 1e-3
+    assert voltage_active.any(), "the voltage limit must be active in both cases"
+    assert np.all(res.multipliers["constraints"][:, 1:][voltage_active] > 0)
+
+
+def test_full_ddp_needs_no_more_iterations_than_gauss_newton():
+    """With the winding limit active the heating curvature (R i^2) matters: full DDP uses it."""
+    problem = thermal_pendulum(t_max=ACTIVE_C)
+    gn = DDPSolver(problem, DDPSettings(backend="casadi")).solve(x0_of(), GOAL)
+    full = DDPSolver(problem, DDPSettings(backend="casadi", full_second_order=True)).solve(x0_of(), GOAL)
+    assert gn.success and full.success
+    assert full.iterations <= gn.iterations
+    assert abs(full.cost - gn.cost) <= 1e-6 * gn.cost
+    np.testing.assert_allclose(full.us, gn.us, atol=1e-3)
+
+
+def test_infeasible_warm_start_is_accepted_and_converges(case):
+    _, problem, ref = case
+    N = problem.horizon
+    xs = np.tile(x0_of(), (N + 1, 1))
+    xs[:, 0] = np.linspace(0.0, 2.0, N + 1)  # a lifted guess that breaks the dynamics everywhere
+    us = np.full((N, 1), 2.5)
+    res = DDPSolver(problem, DDPSettings(backend="casadi", full_second_order=True)).solve(
+        x0_of(), GOAL, warm_start=WarmStart(xs, us))
+    assert res.success, res.message
+    assert res.history["gap"][0] > 1e-2
+    assert abs(res.cost - ref.cost) <= 1e-4 * ref.cost
+
+
+def test_warm_restart_with_multipliers_converges_at_once(case):
+    _, problem, _ = case
+    solver = DDPSolver(problem, DDPSettings(backend="casadi", full_second_order=True))
+    first = solver.solve(x0_of(), GOAL)
+    again = solver.solve(x0_of(), GOAL, warm_start=first)
+    assert again.success and again.iterations <= 1
+    assert abs(again.cost - first.cost) <= 1e-6 * first.cost
+
+
+def test_fatrop_solves_the_same_transcription(case):
+    _, problem, ref = case
+    fatrop = FatropSolver(problem, {"tolerance": 1e-9})
+    res = fatrop.solve(x0_of(), GOAL)
+    assert res.success, res.status
+    assert abs(res.cost - ref.cost) <= 1e-6 * ref.cost
+    assert fatrop.solve(x0_of(), GOAL, warm_start=res).iterations < res.iterations
+    warm = IpoptSolver(problem).solve(x0_of(), GOAL, warm_start=ref)
+    assert warm.success and warm.iterations < ref.iterations
+
+
+def test_ipopt_optimum_with_its_multipliers_is_a_ddp_fixed_point(case):
+    """IPOPT's KKT point (trajectory + inequality multipliers) passes DDP's convergence test."""
+    _, problem, ref = case
+    res = DDPSolver(problem, DDPSettings(backend="casadi", full_second_order=True)).solve(x0_of(), GOAL,
+                                                                                         warm_start=ref)
+    assert res.success and res.iterations <= 1
+    assert abs(res.cost - ref.cost) <= 1e-7 * ref.cost
