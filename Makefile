@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 plan: $(STAMP)
-	$(VENV)/bin/thermo-ddp demo
+	$(VENV)/bin/thermo-ddp compare --payload-kg 40 --hold-s 60
 
 test: $(STAMP)
 	$(PY) -m pytest -q

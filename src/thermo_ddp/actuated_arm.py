@@ -18,7 +18,7 @@ from . import motor
 from .arm import Arm, ArmSettings, build_arm
 from .errors import InputError
 from .integrators import make_step, rk4_step_jacobians, step_jacobians
-from .parameters import JointParameters, load_parameters
+from .parameters import JointParameters, load_parameters, parameters_from_dict
 from .rigid_body import RigidBodyDynamics
 from .thermal import ThermalNetwork, network_from_parameters
 
@@ -87,6 +87,15 @@ class ActuatedArm:
     @property
     def ambient_c(self) -> float:
         return float(np.mean([p.thermal.ambient_c for p in self.params.values()]))
+
+    def to_dict(self, integrator: str, dt_s: float) -> dict:
+        """The plan JSON's ``model``: enough to rebuild this model and its step exactly."""
+        return {"motors": {j: p.to_dict() for j, p in self.params.items()},
+                "robot": self.arm.settings.robot,
+                "locked_joints": dict(self.arm.locked_joints),
+                "gravity_m_s2": np.asarray(self.arm.model.gravity.linear).tolist(),
+                "payload": self.arm.payload_dict(),
+                "integrator": integrator, "dt_s": dt_s}
 
     # --- states -----------------------------------------------------------------------
     def idle_temperatures(self, ambient_c: float | None = None) -> np.ndarray:
@@ -194,6 +203,19 @@ def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Functi
     outputs = ca.Function("arm_outputs", [x, u, ambient], [ca.vertcat(*vals) for vals in outs.values()],
                           names_in, list(outs))
     return ode, ode_jac, outputs
+
+
+def model_from_dict(data: Mapping) -> ActuatedArm:
+    """Rebuild the model echoed in a plan's ``model`` (see :meth:`ActuatedArm.to_dict`)."""
+    motors = data["motors"]
+    settings = ArmSettings(joints=tuple(motors), posture=dict(data["locked_joints"]),
+                           payload_kg=data["payload"]["mass_kg"], payload_lever_m=data["payload"]["lever_m"],
+                           robot=data["robot"])
+    params = {j: parameters_from_dict(sections, f"plan model.motors.{j}") for j, sections in motors.items()}
+    model = ActuatedArm.from_parameters(settings, params)
+    if not np.allclose(model.arm.model.gravity.linear, data["gravity_m_s2"]):
+        raise InputError("plan model", "gravity_m_s2", data["gravity_m_s2"], "only standard gravity is supported")
+    return model
 
 
 def load_model(joints=("arm_left_4_joint",), payload_kg: float = 0.0, payload_lever_m: float | None = None,

@@ -16,6 +16,26 @@ def _demo(args) -> int:
     return 0
 
 
+def _plan(args) -> int:
+    from .lift import plan_lift
+    options = {"solver": args.solver}
+    if args.model:
+        options["parameter_file"] = args.model
+    plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
+    print(plan.report())
+    if args.json:
+        _write_json(plan.to_dict(), args.json)
+    if args.plot:
+        plan.plot(args.plot)
+    return 0
+
+
+def _compare(args) -> int:
+    from .lift import compare_limits
+    print(compare_limits(args.payload_kg, tuple(args.limits_c), args.hold_s, solver=args.solver).table())
+    return 0
+
+
 def _write_json(data: dict, path: str | None) -> None:
     text = json.dumps(data, indent=2)
     if path is None:
@@ -70,7 +90,24 @@ def _demo_parser() -> _Parser:
     return demo
 
 
+def _plan_parser(name: str, description: str) -> _Parser:
+    cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
+    cmd.add_argument("--payload-kg", type=float, default=40.0)
+    cmd.add_argument("--hold-s", type=float, default=30.0, help="requested hold at the goal (default 30 s)")
+    cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp")
+    if name == "plan":
+        cmd.add_argument("--limit-c", type=float, default=84.0, help="winding limit (default 84 °C)")
+        cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default models/arm_left_4_joint.toml)")
+        cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here")
+        cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here")
+    else:
+        cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0])
+    return cmd
+
+
 COMMANDS = {
+    "plan": (lambda: _plan_parser("plan", "plan the elbow lift under a winding-temperature limit"), _plan),
+    "compare": (lambda: _plan_parser("compare", "the lift under several winding limits, as a table"), _compare),
     "demo": (_demo_parser, _demo),
     "identify": (lambda: _recording_parser("identify", "identify parameters from recordings", False), _identify),
     "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "

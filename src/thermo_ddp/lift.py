@@ -1,0 +1,430 @@
+"""``plan_lift()``: can the elbow lift and hold a payload, and for how long, under a winding limit?
+
+The lift is a problem built on the general OCP layer (the solvers know nothing of it):
+- state x = [q, v, T_nodes] of the elbow, control u = winding current, per-knot parameter
+  p = [q_ref, tracking weight, hold flag, ambient_c];
+- costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
+  (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
+- constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
+  ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
+  ``return_band`` (back down at the end); the current box |i| <= peak.
+When the requested hold is infeasible, the longest feasible hold is found by bisection over
+complete optimisations (each a feasibility verdict of the solver), not guessed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from typing import Any, Mapping
+
+import casadi as ca
+import numpy as np
+
+from . import motor
+from ._config import require, settings_from_mapping
+from .actuated_arm import ActuatedArm, load_model
+from .arm import ELBOW
+from .ocp import Constraint, Cost, OptimalControlProblem
+from .solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
+
+log = logging.getLogger(__name__)
+
+SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
+# Full DDP: the winding limit's R(T) i^2 curvature lives in the dynamics, which Gauss-Newton
+# iLQR ignores (it then needs ~4x more iterations on this problem).
+DEFAULT_OPTIONS = {"ddp": DDPSettings(full_second_order=True)}
+_SRC = "plan_lift"
+
+
+@dataclasses.dataclass(frozen=True)
+class LiftSettings:
+    """The lift scenario and its transcription (all times in s, angles in rad)."""
+
+    payload_kg: float = 40.0
+    limit_c: float = 84.0
+    hold_s: float = 10.0
+    goal_rad: float = -math.pi / 2      # forearm horizontal
+    start_rad: float = -0.05            # forearm hanging, just off the elbow's stop at 0 rad
+    lift_s: float = 2.0
+    lower_s: float = 2.0
+    settle_s: float = 0.5
+    dt_s: float = 0.1
+    integrator: str = "implicit_euler"  # stiff-safe at dt = 0.1 s for any payload
+    hold_tolerance_rad: float = 0.02
+    velocity_limit_rad_s: float | None = None   # default: the URDF's limit
+    tracking_weight: float = 100.0
+    energy_weight: float = 1e-2
+    velocity_weight: float = 1e-2
+    solver: str = "ddp"
+    parameter_file: str | None = None
+    find_longest_hold: bool = True
+
+    def __post_init__(self):
+        require(self.payload_kg >= 0, _SRC, "payload_kg", self.payload_kg, "must be >= 0")
+        require(-50 < self.limit_c < 250, _SRC, "limit_c", self.limit_c, "expected a winding limit in °C")
+        for name in ("hold_s", "settle_s"):
+            require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
+        for name in ("lift_s", "lower_s", "dt_s", "hold_tolerance_rad", "tracking_weight"):
+            require(getattr(self, name) > 0, _SRC, name, getattr(self, name), "must be > 0")
+        require(self.solver in SOLVERS, _SRC, "solver", self.solver, f"choose one of {', '.join(SOLVERS)}")
+        require(self.integrator in ("rk4", "implicit_euler"), _SRC, "integrator", self.integrator,
+                "choose rk4 or implicit_euler")
+
+    def knots(self) -> dict[str, int]:
+        return {name: int(round(dur / self.dt_s)) for name, dur in
+                (("lift", self.lift_s), ("hold", self.hold_s), ("lower", self.lower_s), ("settle", self.settle_s))}
+
+
+def _min_jerk(s: np.ndarray) -> np.ndarray:
+    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+
+
+@dataclasses.dataclass(frozen=True)
+class LiftProblem:
+    """The transcribed lift: the general OCP plus its data (x0, per-knot parameters, time grid).
+
+    The horizon is fixed by ``settings.hold_s``; :meth:`with_hold` gives a shorter hold inside the
+    same horizon (new parameters only), so one built solver serves every hold duration.
+    """
+
+    model: ActuatedArm
+    settings: LiftSettings
+    problem: OptimalControlProblem
+    x0: np.ndarray
+    params: np.ndarray
+    time_s: np.ndarray
+    hold_knots: tuple[int, int]
+
+    def with_hold(self, hold_s: float) -> "LiftProblem":
+        params, hold = _reference(self.settings, hold_s, self.model.ambient_c)
+        return dataclasses.replace(self, params=params, hold_knots=hold)
+
+    @property
+    def hold_s(self) -> float:
+        return (self.hold_knots[1] - self.hold_knots[0]) * self.settings.dt_s
+
+
+def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """Per-knot p = [q_ref, tracking weight, hold flag, ambient] for a hold of ``hold_s`` inside the
+    fixed horizon of ``settings.hold_s``: lift, hold, lower, then rest at the start until the end."""
+    k = settings.knots()
+    hold = int(round(hold_s / settings.dt_s))
+    s0, g = settings.start_rad, settings.goal_rad
+    up = s0 + (g - s0) * _min_jerk(np.arange(1, k["lift"] + 1) / k["lift"])
+    down = g + (s0 - g) * _min_jerk(np.arange(1, k["lower"] + 1) / k["lower"])
+    rest = k["settle"] + k["hold"] - hold
+    q_ref = np.concatenate([[s0], up, np.full(hold, g), down, np.full(rest, s0)])
+    flag = np.zeros(q_ref.size)
+    first = k["lift"]
+    flag[first:first + hold + 1] = 1.0  # the goal is reached at the end of the lift, held to its end
+    p = np.column_stack([q_ref, np.full(q_ref.size, settings.tracking_weight), flag,
+                         np.full(q_ref.size, ambient_c)])
+    return p, (first, first + hold)
+
+
+def _functions(model: ActuatedArm, settings: LiftSettings):
+    joint = model.joints[0]
+    m = model.params[joint].motor
+    x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", 4)
+    q, v = x[model.index(joint, "q_rad")], x[model.index(joint, "v_rad_s")]
+    winding = x[model.index(joint, "winding_c")]
+    step = model.step(settings.dt_s, settings.integrator)
+    dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, p[3])], ["x", "u", "p"], ["x_next"])
+    jac = model.step_jacobians(settings.dt_s, settings.integrator)
+    dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, p[3])), ["x", "u", "p"],
+                          ["x_next", "A", "B"])
+    voltage = motor.voltage_v(m, u[0], v, winding)
+    lo, hi = model.arm.model.lowerPositionLimit[0], model.arm.model.upperPositionLimit[0]
+    vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])
+    tol, goal, start = settings.hold_tolerance_rad, settings.goal_rad, settings.start_rad
+
+    def stage(name, expr, out="r"):
+        return ca.Function(name, [x, u, p], [expr], ["x", "u", "p"], [out])
+
+    def terminal(name, expr, out="r"):
+        return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
+
+    costs = (
+        Cost("tracking", 1.0, stage("tracking", ca.sqrt(p[1]) * (q - p[0]))),
+        Cost("joule_energy", settings.energy_weight,
+             stage("joule_energy", ca.sqrt(motor.resistance_ohm(m, winding) * settings.dt_s) * u[0])),
+        Cost("velocity", settings.velocity_weight, stage("velocity", v)),
+    )
+    terminal_costs = (Cost("terminal_tracking", settings.tracking_weight, terminal("terminal_tracking", q - start)),
+                      Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
+    wl, jr, jv = winding - settings.limit_c, ca.vertcat(q - hi, lo - q), ca.vertcat(v - vmax, -v - vmax)
+    constraints = (
+        Constraint("winding_limit", stage("winding_limit", wl, "g")),
+        Constraint("bus_voltage", stage("bus_voltage", ca.vertcat(voltage - m.bus_voltage_v,
+                                                                   -voltage - m.bus_voltage_v), "g")),
+        Constraint("joint_range", stage("joint_range", jr, "g")),
+        Constraint("joint_velocity", stage("joint_velocity", jv, "g")),
+        Constraint("hold_band", stage("hold_band", ca.vertcat(p[2] * (q - goal) - tol, p[2] * (goal - q) - tol), "g")),
+    )
+    terminal_constraints = (
+        Constraint("terminal_winding_limit", terminal("terminal_winding_limit", wl, "g")),
+        Constraint("return_band", terminal("return_band", ca.vertcat(q - start - tol, start - q - tol), "g")),
+    )
+    return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
+
+
+def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
+    files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
+    model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
+    params, hold = _reference(settings, settings.hold_s, model.ambient_c)
+    dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
+    problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons,
+                                    u_lb=[-peak], u_ub=[peak], name="lift", dynamics_jacobians=dyn_jac)
+    x0 = model.state(q=[settings.start_rad])
+    return LiftProblem(model, settings, problem, x0, params, np.arange(params.shape[0]) * settings.dt_s, hold)
+
+
+def initial_guess(lp: LiftProblem) -> WarmStart:
+    """States on the reference at the idle temperatures, currents from static gravity compensation."""
+    q_ref = lp.params[:, 0]
+    xs = np.tile(lp.x0, (q_ref.size, 1))
+    xs[:, 0] = q_ref
+    us = np.array([lp.model.static_current_a([q]) for q in q_ref[:-1]])
+    return WarmStart(xs, us)
+
+
+def make_solver(lp: LiftProblem, solver: str | None = None, options: Mapping[str, Any] | None = None):
+    """A solver instance for the lift's OCP (built once, reusable for every hold and warm start)."""
+    name = solver or lp.settings.solver
+    return SOLVERS[name](lp.problem, options if options is not None else DEFAULT_OPTIONS.get(name))
+
+
+def solve(lp: LiftProblem, solver=None, warm_start: WarmStart | None = None) -> SolverResult:
+    """Solve the lift with a solver instance (or the name of one, built here)."""
+    instance = solver if hasattr(solver, "solve") else make_solver(lp, solver)
+    return instance.solve(lp.x0, lp.params, warm_start or initial_guess(lp))
+
+
+def _feasible(result: SolverResult, tol: float = 1e-4) -> bool:
+    return bool(result.success and result.max_constraint_violation <= tol)
+
+
+def _constraint_names(problem: OptimalControlProblem, terminal: bool) -> list[str]:
+    items = problem.terminal_constraints if terminal else problem.constraints
+    return [c.name for c in items for _ in range(c.size)]
+
+
+def binding_constraints(lp: LiftProblem, result: SolverResult, active_tol: float = 1e-3) -> list[str]:
+    """Names of the inequality constraints at their bound somewhere on the plan (control box included)."""
+    f = lp.problem.functions
+    n = lp.problem.horizon
+    g = np.array(f.stage_constraint.map(n)(result.xs[:-1].T, result.us.T, lp.params[:-1].T)).T
+    gn = np.array(f.terminal_constraint(result.xs[-1], lp.params[-1])).ravel()
+    names = set()
+    for values, labels in ((g.max(axis=0) if g.size else g, _constraint_names(lp.problem, False)),
+                           (gn, _constraint_names(lp.problem, True))):
+        names.update(label for value, label in zip(values, labels) if value >= -active_tol)
+    if np.any(np.abs(result.us) >= lp.problem.u_ub - active_tol):
+        names.add("current_peak")
+    return sorted(names)
+
+
+def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limit_c: float,
+                    horizon_s: float = 3600.0, dt_s: float = 0.5) -> float:
+    """Time for the winding to reach ``limit_c`` holding still at ``q_goal`` from ``x_start``."""
+    x = np.array(x_start, dtype=float)
+    x[0], x[1] = q_goal, 0.0
+    steps = int(horizon_s / dt_s)
+    traj = model.simulate(x, np.tile(model.static_current_a([q_goal]), (steps, 1)), dt_s, "implicit_euler")
+    w = traj["winding_c"][:, 0]
+    hit = np.flatnonzero(w >= limit_c)
+    if hit.size == 0:
+        return math.inf
+    if hit[0] == 0:
+        return 0.0
+    i = hit[0]
+    return float(np.interp(limit_c, w[i - 1:i + 1], traj.time_s[i - 1:i + 1]))
+
+
+def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> tuple[LiftProblem | None,
+                                                                           SolverResult | None, int, float]:
+    """The longest hold (in knots, inside the fixed horizon) that the solver finds feasible.
+
+    A galloping search from ``estimate_s`` (the time-to-limit at the goal) brackets the boundary,
+    then bisection closes it; every verdict is a complete optimisation. Returns the problem and
+    result of the longest feasible hold (None, None when not even touching the goal is feasible),
+    the number of solves and their total solve time.
+    """
+    cache: dict[int, tuple[LiftProblem, SolverResult]] = {}
+
+    def feasible(knots: int) -> bool:
+        if knots not in cache:
+            probe = lp.with_hold(knots * lp.settings.dt_s)
+            done = [k for k, (_, r) in cache.items() if _feasible(r)]
+            warm = WarmStart.from_result(cache[min(done, key=lambda k: abs(k - knots))][1]) if done else None
+            cache[knots] = (probe, solve(probe, solver, warm))
+            log.info("hold %.1f s: %s", probe.hold_s, cache[knots][1].status)
+        return _feasible(cache[knots][1])
+
+    top = lp.hold_knots[1] - lp.hold_knots[0]  # known infeasible
+    guess = int(np.clip(np.floor(estimate_s / lp.settings.dt_s), 0, top - 1))
+    lo, hi, step = -1, top, 1
+    if feasible(guess):
+        lo = guess
+        while lo + step < hi and feasible(lo + step):
+            lo, step = lo + step, 2 * step
+        hi = min(hi, lo + step)
+    else:
+        hi = guess
+        while hi - step >= 0 and not feasible(hi - step):
+            hi, step = hi - step, 2 * step
+        lo = hi - step if hi - step >= 0 else -1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
+    solves, total_s = len(cache), sum(r.solve_s for _, r in cache.values())
+    best = cache.get(lo, (None, None))
+    return best[0], best[1], solves, total_s
+
+
+@dataclasses.dataclass(frozen=True)
+class LiftPlan:
+    """The answer of :func:`plan_lift` (contract: ``to_dict()`` is the plan JSON)."""
+
+    feasible: bool
+    status: str
+    message: str
+    settings: LiftSettings
+    achieved_hold_s: float
+    time_s: np.ndarray
+    xs: np.ndarray
+    us: np.ndarray
+    model: ActuatedArm
+    solver: Mapping[str, Any]
+    binding_constraints: tuple[str, ...]
+    time_to_limit_s: float
+
+    @property
+    def success(self) -> bool:
+        return self.feasible
+
+    def series(self, quantity: str) -> np.ndarray:
+        """(N+1, joints) of a state quantity (q_rad, v_rad_s, winding_c, casing_c, drive_c)."""
+        return self.xs[:, [self.model.index(j, quantity) for j in self.model.joints]]
+
+    def currents(self) -> np.ndarray:
+        """(N+1, joints): u_k holds on [t_k, t_k+1); the last value is repeated at t_N."""
+        return np.vstack([self.us, self.us[-1:]])
+
+    def voltage_v(self) -> np.ndarray:
+        out = self.model.outputs.map(self.xs.shape[0])
+        amb = np.full((1, self.xs.shape[0]), self.model.ambient_c)
+        return np.array(out(self.xs.T, self.currents().T, amb)[0]).T
+
+    def to_dict(self) -> dict:
+        s = self.settings
+        d = {"feasible": self.feasible, "status": self.status, "message": self.message,
+             "payload_kg": s.payload_kg, "limit_c": s.limit_c, "hold_s": s.hold_s,
+             "achieved_hold_s": self.achieved_hold_s, "joints": list(self.model.joints),
+             "time_s": self.time_s.tolist(), "q_rad": self.series("q_rad").tolist(),
+             "v_rad_s": self.series("v_rad_s").tolist(), "current_a": self.currents().tolist(),
+             "voltage_v": self.voltage_v().tolist(), "winding_c": self.series("winding_c").tolist(),
+             "casing_c": self.series("casing_c").tolist()}
+        if "drive" in self.model.networks[self.model.joints[0]].nodes:
+            d["drive_c"] = self.series("drive_c").tolist()
+        d["model"] = self.model.to_dict(s.integrator, s.dt_s)
+        d["solver"] = dict(self.solver)
+        d["binding_constraints"] = list(self.binding_constraints)
+        d["time_to_limit_s"] = None if math.isinf(self.time_to_limit_s) else self.time_to_limit_s
+        return d
+
+    def report(self) -> str:
+        w, c = self.series("winding_c").max(), self.series("casing_c").max()
+        ttl = "never" if math.isinf(self.time_to_limit_s) else f"{self.time_to_limit_s:.1f} s"
+        return "\n".join([
+            f"lift {self.settings.payload_kg:g} kg, winding limit {self.settings.limit_c:g} °C: "
+            f"{'FEASIBLE' if self.feasible else 'INFEASIBLE'} ({self.status})",
+            f"  {self.message}",
+            f"  hold requested {self.settings.hold_s:.1f} s, achieved {self.achieved_hold_s:.1f} s; "
+            f"time to limit at the goal {ttl}",
+            f"  peak winding {w:.1f} °C, peak casing {c:.1f} °C, peak |current| {np.abs(self.us).max():.2f} A",
+            f"  binding: {', '.join(self.binding_constraints) or 'none'}",
+            f"  solver {self.solver['name']}: {self.solver['iterations']} iterations, "
+            f"{1e3 * self.solver['solve_s']:.1f} ms (all solves {1e3 * self.solver['total_solve_s']:.1f} ms)"])
+
+    def plot(self, path) -> None:
+        from .plots import plot_lift
+        plot_lift(self, path)
+
+
+def _solver_summary(name: str, result: SolverResult, total_s: float, solves: int) -> dict:
+    return {"name": name, "iterations": int(result.iterations), "solve_s": float(result.solve_s),
+            "cost": float(result.cost), "max_constraint_violation": float(result.max_constraint_violation),
+            "status": result.status, "total_solve_s": float(total_s), "solves": solves}
+
+
+def plan_lift(payload_kg: float = 40.0, limit_c: float = 84.0, hold_s: float = 10.0, **options) -> LiftPlan:
+    """Plan lifting ``payload_kg`` at the gripper to horizontal, holding ``hold_s``, lowering back,
+    with the winding kept under ``limit_c``. Options: the fields of :class:`LiftSettings`."""
+    settings = settings_from_mapping(LiftSettings, {"payload_kg": payload_kg, "limit_c": limit_c,
+                                                    "hold_s": hold_s, **options}, _SRC)
+    lp = build_lift_problem(settings)
+    solver = make_solver(lp)
+    result = solve(lp, solver)
+    total, solves = result.solve_s, 1
+    achieved = settings.hold_s
+    if _feasible(result):
+        status, message = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C"
+    elif not settings.find_longest_hold:
+        status, message, achieved = "infeasible", f"the {hold_s:.1f} s hold is infeasible ({result.message})", 0.0
+    else:
+        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c)  # holding from the start
+        best_lp, best, probes, probe_s = longest_feasible_hold(lp, solver, estimate)
+        solves, total = solves + probes, total + probe_s
+        if best is None:
+            status, achieved = "infeasible", 0.0
+            message = f"the payload cannot be lifted under {limit_c:g} °C ({result.message})"
+        else:
+            lp, result, achieved = best_lp, best, best_lp.hold_s
+            status = "infeasible_hold"
+            message = f"a {hold_s:.1f} s hold is infeasible; the longest feasible hold is {achieved:.1f} s"
+    binding = tuple(binding_constraints(lp, result))
+    if status != "feasible" and binding:
+        message += f"; binding: {', '.join(binding)}"
+    ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
+    return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
+                    result.us, lp.model, _solver_summary(settings.solver, result, total, solves), binding, ttl)
+
+
+@dataclasses.dataclass(frozen=True)
+class LimitComparison:
+    """The same lift planned under several winding limits."""
+
+    plans: tuple[LiftPlan, ...]
+
+    def rows(self) -> list[dict]:
+        return [{"limit_c": p.settings.limit_c, "feasible": p.feasible, "hold_s": p.achieved_hold_s,
+                 "peak_winding_c": float(p.series("winding_c").max()),
+                 "peak_casing_c": float(p.series("casing_c").max()),
+                 "joule_energy_j": joule_energy_j(p), "binding": ", ".join(p.binding_constraints),
+                 "solve_s": p.solver["total_solve_s"]} for p in self.plans]
+
+    def table(self) -> str:
+        p0 = self.plans[0].settings
+        head = (f"{p0.payload_kg:g} kg at the gripper, requested hold {p0.hold_s:g} s\n"
+                f"{'limit °C':>9} {'feasible':>9} {'hold s':>7} {'winding °C':>11} {'casing °C':>10} "
+                f"{'Joule kJ':>9} {'solve s':>8}  binding")
+        lines = [f"{r['limit_c']:9.0f} {str(r['feasible']):>9} {r['hold_s']:7.1f} {r['peak_winding_c']:11.1f} "
+                 f"{r['peak_casing_c']:10.1f} {r['joule_energy_j'] / 1e3:9.2f} {r['solve_s']:8.2f}  {r['binding']}"
+                 for r in self.rows()]
+        return "\n".join([head, *lines])
+
+
+def joule_energy_j(plan: LiftPlan) -> float:
+    """Heat put into the winding over the plan, sum of R(T_w) i^2 dt."""
+    joule = plan.model.outputs.map(plan.us.shape[0])
+    amb = np.full((1, plan.us.shape[0]), plan.model.ambient_c)
+    power = np.array(joule(plan.xs[:-1].T, plan.us.T, amb)[plan.model.outputs.name_out().index("joule_w")])
+    return float(power.sum() * plan.settings.dt_s)
+
+
+def compare_limits(payload_kg: float = 40.0, limits_c=(84.0, 140.0), hold_s: float = 30.0,
+                   **options) -> LimitComparison:
+    """:func:`plan_lift` under each winding limit (e.g. the 84 °C cut-off vs the 140 °C range)."""
+    return LimitComparison(tuple(plan_lift(payload_kg, lim, hold_s, **options) for lim in limits_c))
