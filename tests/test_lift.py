@@ -1,0 +1,97 @@
+"""plan_lift(): contract JSON, reproducibility from the echoed model, DDP vs IPOPT, longest hold."""
+import json
+
+import numpy as np
+import pytest
+
+from thermo_ddp.actuated_arm import model_from_dict
+from thermo_ddp.cli import main
+from thermo_ddp.errors import InputError
+from thermo_ddp.lift import LiftSettings, binding_constraints, build_lift_problem, plan_lift, solve
+
+PLAN_KEYS = {"feasible", "status", "message", "payload_kg", "limit_c", "hold_s", "achieved_hold_s", "joints",
+             "time_s", "q_rad", "v_rad_s", "current_a", "voltage_v", "winding_c", "casing_c", "drive_c", "model",
+             "solver"}
+MODEL_KEYS = {"motors", "robot", "locked_joints", "gravity_m_s2", "payload", "integrator", "dt_s"}
+SOLVER_KEYS = {"name", "iterations", "solve_s", "cost", "max_constraint_violation"}
+
+
+@pytest.fixture(scope="module")
+def feasible_plan():
+    return plan_lift(40.0, 84.0, 8.0)
+
+
+def test_feasible_plan_respects_every_limit(feasible_plan):
+    plan = feasible_plan
+    assert plan.feasible and plan.status == "feasible" and plan.achieved_hold_s == 8.0
+    m = plan.model.params["arm_left_4_joint"].motor
+    assert plan.series("winding_c").max() <= 84.0 + 1e-4
+    assert np.abs(plan.us).max() <= m.current_peak_a + 1e-9
+    assert np.abs(plan.voltage_v()).max() <= m.bus_voltage_v + 1e-4
+    q = plan.series("q_rad")[:, 0]
+    start, end = (round(x / plan.settings.dt_s) for x in (plan.settings.lift_s, plan.settings.lift_s + 8.0))
+    assert np.abs(q[start:end + 1] - plan.settings.goal_rad).max() <= plan.settings.hold_tolerance_rad + 1e-6
+    assert abs(q[-1] - plan.settings.start_rad) <= plan.settings.hold_tolerance_rad + 1e-6
+
+
+def test_plan_json_is_the_contract_and_reproducible_from_its_model(feasible_plan):
+    d = json.loads(json.dumps(feasible_plan.to_dict()))
+    assert PLAN_KEYS <= set(d) and MODEL_KEYS <= set(d["model"]) and SOLVER_KEYS <= set(d["solver"])
+    assert d["joints"] == ["arm_left_4_joint"] and d["model"]["robot"].endswith(".urdf")
+    n = len(d["time_s"])
+    assert all(len(d[k]) == n and len(d[k][0]) == 1 for k in ("q_rad", "current_a", "winding_c", "casing_c"))
+    model = model_from_dict(d["model"])
+    x0 = model.state(q=d["q_rad"][0], v=d["v_rad_s"][0],
+                     temperatures_c=[d["winding_c"][0][0], d["casing_c"][0][0], d["drive_c"][0][0]])
+    traj = model.simulate(x0, np.array(d["current_a"][:-1]), d["model"]["dt_s"], d["model"]["integrator"])
+    for key in ("q_rad", "winding_c", "casing_c"):
+        assert np.abs(traj[key] - np.array(d[key])).max() < 1e-6
+
+
+@pytest.mark.parametrize("hold_s, active", [(11.0, False), (11.5, True)])
+def test_ddp_and_ipopt_reach_the_same_optimum(hold_s, active):
+    lp = build_lift_problem(LiftSettings(hold_s=hold_s, limit_c=84.0))
+    ddp, ipopt = solve(lp, "ddp"), solve(lp, "ipopt")
+    assert ddp.success and ipopt.success
+    assert abs(ddp.cost - ipopt.cost) <= 1e-4 * abs(ipopt.cost)
+    assert binding_constraints(lp, ddp) == binding_constraints(lp, ipopt)
+    assert ("winding_limit" in binding_constraints(lp, ddp)) == active
+
+
+def test_infeasible_hold_gives_the_longest_feasible_hold_found_by_the_optimiser():
+    plan = plan_lift(40.0, 84.0, 20.0)
+    assert not plan.feasible and plan.status == "infeasible_hold"
+    assert 5.0 < plan.achieved_hold_s < 20.0
+    assert "winding_limit" in plan.binding_constraints and "longest feasible hold" in plan.message
+    assert plan.series("winding_c").max() == pytest.approx(84.0, abs=0.05)
+    # the verdict is the optimiser's: one knot more is infeasible for the same solver
+    lp = build_lift_problem(LiftSettings(hold_s=20.0, limit_c=84.0))
+    longer = solve(lp.with_hold(plan.achieved_hold_s + lp.settings.dt_s), "ddp")
+    assert not (longer.success and longer.max_constraint_violation < 1e-4)
+    # and the time-to-limit at the goal bounds the hold from above (the lift heats too)
+    assert plan.achieved_hold_s <= plan.time_to_limit_s + 2.0
+
+
+def test_unknown_option_and_bad_value_raise():
+    with pytest.raises(InputError, match="unknown option"):
+        plan_lift(40.0, 84.0, 5.0, horizon=3)
+    with pytest.raises(InputError, match="solver"):
+        plan_lift(40.0, 84.0, 5.0, solver="snopt")
+
+
+def test_cli_plan_writes_json_and_four_panel_plot(tmp_path, capsys):
+    out, fig = tmp_path / "plan.json", tmp_path / "plan.png"
+    assert main(["plan", "--payload-kg", "20", "--limit-c", "84", "--hold-s", "5", "--json", str(out),
+                 "--plot", str(fig)]) == 0
+    d = json.loads(out.read_text())
+    assert d["feasible"] and d["payload_kg"] == 20.0 and d["solver"]["name"] == "ddp"
+    assert fig.stat().st_size > 20_000
+    assert "FEASIBLE" in capsys.readouterr().out
+
+
+def test_cli_plan_bad_model_file_exits_2(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[joint]\nname = 'arm_left_4_joint'\n")
+    assert main(["plan", "--model", str(bad), "--hold-s", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(bad) in err
