@@ -53,3 +53,40 @@ def test_bad_csv_names_file_column_and_row(tmp_path, capsys):
     assert main(["identify", str(bad), "--physics", "mechanical"]) == 2
     err = capsys.readouterr().err.strip()
     assert str(bad) in err and "position" in err and "row 3" in err
+
+
+@pytest.fixture(scope="module")
+def drive_heated_csvs(tmp_path_factory):
+    """Two short recordings of the simulated elbow whose drive heats the motor (hidden from the model)."""
+    from thermo_ddp.testbed import PlantParameters, static_3a, static_4a
+
+    plant = PlantParameters().with_effects("drive")
+    folder = tmp_path_factory.mktemp("thermal")
+    paths = []
+    for make in (static_3a, static_4a):
+        rec = make(params=plant, heating_s=1800.0, cooling_s=1800.0)
+        path = folder / f"{rec.name}.csv"
+        rec.to_csv(path)
+        paths.append(str(path))
+    return paths
+
+
+def test_identify_thermal_cli(drive_heated_csvs, tmp_path):
+    out = tmp_path / "id.json"
+    assert main(["identify", *drive_heated_csvs, "--json", str(out)]) == 0  # --physics defaults to thermal
+    d = json.loads(out.read_text())
+    assert d["physics"] == "thermal" and d["success"]
+    assert {"capacity_j_per_k", "resistance_k_per_w"} <= set(d["parameters"])
+
+
+def test_diagnose_thermal_cli_finds_drive_heating_and_writes_a_loadable_parameter_file(drive_heated_csvs, tmp_path):
+    from thermo_ddp.parameters import parameters_from_dict
+
+    out = tmp_path / "d.json"
+    assert main(["diagnose", "--physics", "thermal", *drive_heated_csvs, "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert DIAGNOSIS_KEYS <= set(d)
+    assert [m["term"] for m in d["missing_physics"]] == ["drive_heating"]
+    assert {m["regime"] for m in d["mismatches"]} & {"idle", "cooling"}
+    assert d["validation"]["rmse_after"] < 0.5 * d["validation"]["rmse_before"]
+    assert parameters_from_dict(d["parameter_file"]).thermal.model == "two_node_drive"
