@@ -2,14 +2,14 @@
 import numpy as np
 
 from thermo_ddp.actuated_arm import load_model
-from thermo_ddp.codegen import cache_dir, compiled, function_hash
+from thermo_ddp.codegen import compiled, library_path
 
 
 def test_compiled_step_jacobians_equal_sx_and_are_cached():
     model = load_model(payload_kg=40.0)
     jac = model.step_jacobians(0.01)
     c_jac = compiled(jac)
-    lib = cache_dir() / f"{jac.name()}_{function_hash(jac)}.so"
+    lib = library_path({jac.name(): jac})
     assert lib.is_file()
     stamp = lib.stat().st_mtime_ns
     x, u = model.state(q=[-1.0], v=[0.3]), np.array([-9.0])
@@ -18,4 +18,5 @@ def test_compiled_step_jacobians_equal_sx_and_are_cached():
     compiled(jac)
     assert lib.stat().st_mtime_ns == stamp  # reused, not rebuilt
     other = load_model(payload_kg=20.0).step_jacobians(0.01)
-    assert function_hash(other) != function_hash(jac)  # a changed model never loads a stale library
+    assert library_path({other.name(): other}) != lib  # a changed model never loads a stale library
+    assert library_path({jac.name(): jac}, ("-O1",)) != lib  # nor do other compiler flags

@@ -12,31 +12,16 @@ and make one call per pass (no Python loop over knots).
 """
 from __future__ import annotations
 
-import hashlib
 import logging
-import os
-import platform
 import subprocess
-import tempfile
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from ..codegen import cache_dir
+from ..codegen import compile_functions
 from ._riccati import NumpyOps, SymOps, backward_step, knot_model
 
 log = logging.getLogger(__name__)
-
-
-def _host_tag() -> str:
-    """CPU model and instruction-set flags: code built with -march=native runs only there."""
-    try:
-        lines = Path("/proc/cpuinfo").read_text().splitlines()
-    except OSError:
-        return platform.machine() + platform.processor()
-    keep = [ln for ln in lines if ln.startswith(("model name", "flags"))][:2]
-    return platform.machine() + "".join(keep)
 
 
 class Layout:
@@ -164,40 +149,6 @@ def build_passes(problem, settings, layout):
     evaluate = ca.Function("ddp_evaluate", [X, U, P], [ca.sum2(cost) + costN, G, gN, gaps],
                            ["X", "U", "P"], ["J", "G", "GN", "C"])
     return {"backward": backward, "forward": forward, "evaluate": evaluate}, knots
-
-
-def compile_functions(functions: dict, flags: tuple[str, ...] = ("-O2", "-march=native")) -> dict:
-    """Generate C for ``functions``, compile with gcc into a cached shared library, load it.
-
-    The library name is a hash of the serialized functions, the CasADi version and the flags
-    (and the CPU for -march=native), so any change to the problem or solver options makes a new
-    library. The cache folder is thermo_ddp.codegen.cache_dir() ($THERMO_DDP_CACHE).
-    """
-    digest = hashlib.sha256()
-    digest.update(ca.__version__.encode())
-    digest.update(" ".join(flags).encode())
-    if any("native" in f for f in flags):
-        digest.update(_host_tag().encode())
-    for name in sorted(functions):
-        digest.update(name.encode())
-        digest.update(functions[name].serialize().encode())
-    tag = digest.hexdigest()[:20]
-    folder = cache_dir()
-    library = folder / f"ddp_{tag}.so"
-    if not library.exists():
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=folder) as tmp:
-            source = f"ddp_{tag}.c"
-            gen = ca.CodeGenerator(source, {"with_header": False})
-            for name in sorted(functions):
-                gen.add(functions[name])
-            gen.generate(tmp + os.sep)
-            built = Path(tmp) / f"ddp_{tag}.so"
-            log.info("compiling %s with gcc %s", source, " ".join(flags))
-            subprocess.run(["gcc", *flags, "-shared", "-fPIC", "-o", str(built), str(Path(tmp) / source), "-lm"],
-                           check=True, capture_output=True)
-            os.replace(built, library)
-    return {name: ca.external(f.name(), str(library)) for name, f in functions.items()}
 
 
 class _BufferCall:
