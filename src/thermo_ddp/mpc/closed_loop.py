@@ -1,0 +1,247 @@
+"""``run_closed_loop()``: plant, observer and receding-horizon controller together, and its result."""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from .._config import settings_from_mapping
+from ..actuated_arm import ActuatedArm, load_model
+from ..arm import ELBOW
+from .controller import ControlStep, RecedingHorizonController, planning_problem
+from .observer import ExtendedKalmanFilter, ObserverSettings
+from .plant import Measurement, Plant, perturbed_model
+from .settings import MPCSettings
+
+log = logging.getLogger(__name__)
+_SRC = "run_closed_loop"
+
+
+@dataclasses.dataclass(frozen=True)
+class ClosedLoopResult:
+    """The closed loop's time series at the control instants t_k (k = 0..K) and per-period logs (K).
+
+    True plant signals: ``winding_c``, ``casing_c``, ``drive_c`` (None without a drive node), ``q_rad``,
+    ``v_rad_s``. Observer: ``estimated_winding_c``, ``winding_std_c``, ``resistance_scale``. Sensor:
+    ``measured_casing_c`` (the last received sample; ``casing_received`` says which instants got one).
+    Per period k -> k+1: ``current_a``, ``voltage_v`` (at t_k), ``solve_s``, ``first_solve_s``,
+    ``iterations``, ``step_status``, ``hold_s``. ``peak_winding_c`` includes the plant's sub-steps.
+    ``planner_x0`` (K, nx) and ``planner_params`` (K, N+1, np): what every solve was given;
+    ``measurements`` (K+1): what the observer was given (to re-run a filter offline).
+    """
+
+    success: bool
+    status: str
+    message: str
+    settings: MPCSettings
+    time_s: np.ndarray
+    winding_c: np.ndarray
+    casing_c: np.ndarray
+    drive_c: np.ndarray | None
+    q_rad: np.ndarray
+    v_rad_s: np.ndarray
+    estimated_winding_c: np.ndarray
+    winding_std_c: np.ndarray
+    resistance_scale: np.ndarray
+    measured_casing_c: np.ndarray
+    casing_received: np.ndarray
+    current_a: np.ndarray
+    voltage_v: np.ndarray
+    solve_s: np.ndarray
+    first_solve_s: np.ndarray
+    iterations: np.ndarray
+    step_status: tuple[str, ...]
+    hold_s: np.ndarray
+    peak_winding_c: float
+    safety_cutoff_c: float
+    cutoff_tripped: bool
+    planner_x0: np.ndarray
+    planner_params: np.ndarray
+    measurements: tuple[Measurement, ...]
+
+    def __repr__(self) -> str:
+        return (f"ClosedLoopResult({self.status}, peak winding {self.peak_winding_c:.2f} °C, "
+                f"limit {self.limit_c:g} °C)")
+
+    @property
+    def limit_c(self) -> float:
+        return self.settings.limit_c
+
+    @property
+    def margin_c(self) -> float:
+        """Limit minus the peak TRUE winding (negative: the limit was exceeded)."""
+        return self.limit_c - self.peak_winding_c
+
+    @property
+    def estimation_error_c(self) -> np.ndarray:
+        return self.estimated_winding_c - self.winding_c
+
+    def warm_solve_s(self) -> np.ndarray:
+        """First-solve times of the warm periods (k >= 1)."""
+        return self.first_solve_s[1:]
+
+    def summary(self) -> dict[str, Any]:
+        warm = self.warm_solve_s()
+        counts = {s: self.step_status.count(s) for s in sorted(set(self.step_status))}
+        return {"success": self.success, "status": self.status, "message": self.message,
+                "limit_c": self.limit_c, "planning_limit_c": self.settings.planning_limit_c,
+                "peak_winding_c": self.peak_winding_c, "margin_c": self.margin_c,
+                "peak_casing_measured_c": float(self.measured_casing_c.max()),
+                "cutoff_tripped": self.cutoff_tripped, "safety_cutoff_c": self.safety_cutoff_c,
+                "requested_hold_s": self.settings.hold_s, "planned_hold_s": float(self.hold_s[-1]),
+                "max_abs_estimation_error_c": float(np.abs(self.estimation_error_c).max()),
+                "final_resistance_scale": float(self.resistance_scale[-1]),
+                "warm_solve_median_s": float(np.median(warm)) if warm.size else None,
+                "warm_solve_max_s": float(warm.max()) if warm.size else None,
+                "period_solve_max_s": float(self.solve_s.max()),
+                "median_iterations": float(np.median(self.iterations[1:])) if warm.size else None,
+                "step_status": counts}
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.summary()
+        d["settings"] = dataclasses.asdict(self.settings)
+        for key in ("time_s", "winding_c", "casing_c", "q_rad", "v_rad_s", "estimated_winding_c", "winding_std_c",
+                    "resistance_scale", "measured_casing_c", "current_a", "voltage_v", "solve_s", "iterations",
+                    "hold_s"):
+            d[key] = np.asarray(getattr(self, key)).tolist()
+        if self.drive_c is not None:
+            d["drive_c"] = self.drive_c.tolist()
+        d["step_status_series"] = list(self.step_status)
+        return d
+
+    def report(self) -> str:
+        s = self.summary()
+        warm = "n/a" if s["warm_solve_median_s"] is None else \
+            f"{1e3 * s['warm_solve_median_s']:.2f} ms median, {1e3 * s['warm_solve_max_s']:.2f} ms max"
+        return "\n".join([
+            f"closed-loop lift {self.settings.payload_kg:g} kg, winding limit {self.limit_c:g} °C "
+            f"(planned at {self.settings.planning_limit_c:g} °C): {'SUCCESS' if self.success else 'FAILURE'} "
+            f"({self.status})",
+            f"  {self.message}",
+            f"  peak TRUE winding {self.peak_winding_c:.2f} °C, margin {self.margin_c:.2f} K; "
+            f"largest |estimate - true| {s['max_abs_estimation_error_c']:.2f} K; "
+            f"resistance scale estimate {s['final_resistance_scale']:.3f} "
+            f"(plant {self.settings.plant_resistance_scale:g})",
+            f"  measured casing peak {s['peak_casing_measured_c']:.1f} °C, cut-off {self.safety_cutoff_c:g} °C "
+            f"{'TRIPPED' if self.cutoff_tripped else 'not tripped'}",
+            f"  hold requested {self.settings.hold_s:.1f} s, planned {s['planned_hold_s']:.1f} s",
+            f"  warm re-solves: {warm}; median {s['median_iterations']} iterations; "
+            f"periods: {', '.join(f'{k} {v}' for k, v in s['step_status'].items())}"])
+
+    def plot(self, path) -> None:
+        from .plots import plot_closed_loop
+        plot_closed_loop(self, path)
+
+
+@dataclasses.dataclass
+class _Log:
+    rows: dict[str, list] = dataclasses.field(default_factory=lambda: {k: [] for k in (
+        "x", "est", "std", "scale", "casing", "received", "current", "voltage", "steps", "x0", "params",
+        "measurements")})
+
+    def instant(self, plant: Plant, observer: ExtendedKalmanFilter, m: Measurement, casing, received: bool):
+        r = self.rows
+        r["measurements"].append(m)
+        r["x"].append(plant.x.copy())
+        r["est"].append(observer.winding_c)
+        r["std"].append(observer.winding_std_c)
+        r["scale"].append(observer.resistance_scale)
+        r["casing"].append(casing)
+        r["received"].append(received)
+
+    def period(self, plant: Plant, step: ControlStep, x0, params):
+        r = self.rows
+        r["current"].append(plant.current_a.copy())
+        r["voltage"].append(plant.voltage_v())
+        r["steps"].append(step)
+        r["x0"].append(np.array(x0))
+        r["params"].append(params)
+
+
+def build_models(settings: MPCSettings) -> tuple[ActuatedArm, ActuatedArm]:
+    """The planner's model and the plant's (thermal resistances and capacities scaled)."""
+    files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
+    model = load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
+    return model, perturbed_model(model, settings.plant_resistance_scale, settings.plant_capacity_scale)
+
+
+def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observer: ObserverSettings | None = None,
+                    progress: bool = True, **options) -> ClosedLoopResult:
+    """Lift, hold and lower in closed loop: the plant (mismatched model, fine RK4, noisy sensors), the EKF
+    and the receding-horizon DDP controller. Options: the fields of :class:`MPCSettings` (or ``settings``).
+    ``solver``: a DDP solver built earlier for the same planning problem (see ``controller.mpc_solver``)."""
+    if settings is None:
+        settings = settings_from_mapping(MPCSettings, options, _SRC)
+    elif options:
+        raise TypeError("give either settings or options, not both")
+    model, plant_model = build_models(settings)
+    lp = planning_problem(settings, model)
+    controller = RecedingHorizonController(lp, settings, solver)
+    rng = np.random.default_rng(settings.seed)
+    plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad]), settings, rng)
+    ekf = ExtendedKalmanFilter(model, settings, observer or ObserverSettings())
+    steps = controller.task_knots + int(round(settings.extra_s / settings.control_period_s))
+    m = plant.measure()
+    while m.casing_c is None:     # a delayed or dropped sensor: wait at rest for the first sample
+        plant.apply(np.zeros(model.nu))
+        m = plant.measure()
+    ekf.initialise(m)
+    log_ = _Log()
+    last_casing = m.casing_c.copy()
+    log_.instant(plant, ekf, m, last_casing, True)
+    tripped = False
+    started = time.perf_counter()
+    for k in tqdm(range(steps), desc="closed loop", unit="period", disable=not progress, leave=False):
+        x0 = ekf.state
+        step = controller.start(x0) if k == 0 else controller.step(x0)
+        plant.apply(step.current_a)
+        log_.period(plant, step, x0, controller.window(k))  # the window of the accepted plan
+        m = plant.measure()
+        ekf.predict(m.current_a)
+        ekf.update(m)
+        received = m.casing_c is not None
+        last_casing = m.casing_c.copy() if received else last_casing
+        log_.instant(plant, ekf, m, last_casing, received)
+        if received and np.any(m.casing_c >= plant.safety_cutoff_c):
+            tripped = True
+            log.warning("t = %.1f s: measured casing %.1f °C: safety cut-off", plant.time_s, m.casing_c.max())
+            break
+    log.info("closed loop: %d periods in %.2f s", len(log_.rows["steps"]), time.perf_counter() - started)
+    return _result(settings, plant, log_, tripped)
+
+
+def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> ClosedLoopResult:
+    model, r = plant.model, log_.rows
+    xs = np.array(r["x"])
+    steps: list[ControlStep] = r["steps"]
+
+    def node(name):
+        return xs[:, model.node_indices(name)][:, 0]
+
+    drive = node("drive") if "drive" in model.networks[model.joints[0]].nodes else None
+    peak = plant.peak_winding_c
+    fallbacks = sum(s.status == "fallback" for s in steps)
+    if tripped:
+        success, status = False, "safety_cutoff"
+        message = f"the measured casing reached the {plant.safety_cutoff_c:g} °C cut-off"
+    elif peak > settings.limit_c:
+        success, status = False, "winding_limit_exceeded"
+        message = f"the true winding reached {peak:.2f} °C > {settings.limit_c:g} °C"
+    else:
+        success, status = True, "completed"
+        message = f"the true winding stayed {settings.limit_c - peak:.2f} K under the limit"
+    if fallbacks:
+        message += f"; {fallbacks} periods used the fallback control"
+    return ClosedLoopResult(
+        success, status, message, settings, np.arange(xs.shape[0]) * settings.control_period_s,
+        node("winding"), node("casing"), drive, xs[:, 0], xs[:, model.nu],
+        np.array(r["est"])[:, 0], np.array(r["std"])[:, 0], np.array(r["scale"]), np.array(r["casing"])[:, 0],
+        np.array(r["received"]), np.array(r["current"])[:, 0], np.array(r["voltage"])[:, 0],
+        np.array([s.solve_s for s in steps]), np.array([s.first_solve_s for s in steps]),
+        np.array([s.iterations for s in steps]), tuple(s.status for s in steps), np.array([s.hold_s for s in steps]),
+        float(peak), plant.safety_cutoff_c, tripped, np.array(r["x0"]), np.array(r["params"]),
+        tuple(r["measurements"]))

@@ -1,0 +1,200 @@
+"""Receding-horizon control of the elbow lift: the lift OCP re-solved from the estimated state
+every control period, warm-started from the previous plan shifted by one knot.
+
+The horizon keeps a fixed length (one built solver); the task's per-knot parameters (reference,
+hold flag, ambient) are shifted in time and the last row (at rest at the start) is held beyond the
+task's end. When a re-solve is infeasible, the remaining hold is shortened (the winding limit has
+priority over holding) and the problem re-solved; if still infeasible, the controller falls back
+to the previous plan's shifted control with its feedback gains, u = u_j + K_j (x - x_j).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import casadi as ca
+import numpy as np
+
+from ..lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, longest_feasible_hold, \
+    make_solver, time_to_limit_s
+from .._config import require
+from ..actuated_arm import ActuatedArm
+from ..ocp import Constraint, OptimalControlProblem
+from ..solvers import DDPSettings, SolverResult, WarmStart
+from .settings import MPCSettings
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class ControlStep:
+    """One control period: the current sent and how it was obtained."""
+
+    current_a: np.ndarray
+    status: str                # "cold", "solved", "hold_shortened" or "fallback"
+    solver_status: str         # of the last solve
+    solve_s: float             # all solves of this period
+    first_solve_s: float       # the first (warm) solve alone
+    iterations: int            # of all solves
+    solves: int
+    hold_s: float              # the planned hold after this period
+    cost: float                # of the last solve
+
+
+def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
+    """The lift OCP of the controller: ``horizon_knots`` knots at the control period, limit backed off."""
+    base = LiftSettings(payload_kg=settings.payload_kg, limit_c=settings.planning_limit_c,
+                        dt_s=settings.control_period_s, integrator=settings.integrator,
+                        parameter_file=settings.parameter_file)
+    room = settings.horizon_knots * base.dt_s - base.lift_s - base.lower_s - base.settle_s
+    require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.horizon_knots,
+            f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
+    lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
+    return dataclasses.replace(lp, problem=_limit_on_next_state(lp.problem))
+
+
+def _limit_on_next_state(problem: OptimalControlProblem) -> OptimalControlProblem:
+    """The lift OCP with the stage winding limit moved from x_k to x_{k+1} = f(x_k, u_k, p_k).
+
+    The set of constrained states is then x_1..x_N (x_N also by the terminal limit): the same as
+    the lift's except the measured present state x_0, which no control can change. Without this,
+    an estimate a few mK over the limit (plant mismatch during one period) makes every re-solve
+    infeasible at knot 0.
+    """
+    x, u, p = (ca.SX.sym(n, problem.dynamics.size1_in(i)) for i, n in enumerate(problem.dynamics.name_in()))
+    x_next = problem.dynamics(x, u, p)
+    constraints = []
+    for c in problem.constraints:
+        if c.name == "winding_limit":
+            g = ca.Function("winding_limit_next", [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"])
+            c = Constraint("winding_limit_next", g)
+        constraints.append(c)
+    return dataclasses.replace(problem, constraints=tuple(constraints), name="lift_mpc")
+
+
+def mpc_solver(lp: LiftProblem, settings: MPCSettings):
+    """Full-second-order DDP (the R(T) i^2 curvature is in the dynamics) with the per-period iteration cap."""
+    return make_solver(lp, "ddp", DDPSettings(full_second_order=True, max_iterations=settings.max_iterations))
+
+
+class RecedingHorizonController:
+    """Plans the lift task of ``settings`` (hold ``settings.hold_s``) in a window of ``lp.problem.horizon`` knots."""
+
+    def __init__(self, lp: LiftProblem, settings: MPCSettings, solver=None):
+        self.lp, self.settings = lp, settings
+        self.solver = solver if solver is not None else mpc_solver(lp, settings)
+        dt = lp.settings.dt_s
+        self.lift_knots = lp.settings.knots()["lift"]
+        self.hold_knots = int(round(settings.hold_s / dt))
+        fits = self.hold_knots <= lp.hold_knots[1] - lp.hold_knots[0]
+        self.task = lp if fits else build_lift_problem(dataclasses.replace(lp.settings, hold_s=settings.hold_s),
+                                                       lp.model)
+        knots = lp.settings.knots()
+        self.task_knots = knots["lift"] + self.hold_knots + knots["lower"] + knots["settle"]
+        self.k = 0
+        self.plan: SolverResult | None = None
+        self.plan_age = 0
+
+    @property
+    def hold_s(self) -> float:
+        return self.hold_knots * self.lp.settings.dt_s
+
+    def window(self, k: int | None = None) -> np.ndarray:
+        """Per-knot parameters of the window starting at knot ``k`` (default: now), last task row held."""
+        k = self.k if k is None else k
+        task = self.task.with_hold(self.hold_s).params
+        n = self.lp.problem.horizon + 1
+        rows = task[k:k + n]
+        window = np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)])
+        window[0, 2] = 0.0  # no hold band on the measured present state: no control can change it
+        return window
+
+    def _acceptable(self, result: SolverResult) -> bool:
+        return bool(np.isfinite(result.cost) and result.max_constraint_violation <= self.settings.feasibility_tolerance)
+
+    def start(self, x_est: np.ndarray) -> ControlStep:
+        """Cold plan at knot 0. When the requested hold is infeasible from the estimated state, it is cut
+        to what the window holds and the longest feasible hold is searched (complete optimisations, as
+        plan_lift does)."""
+        lp = dataclasses.replace(self.lp, x0=np.asarray(x_est, float), params=self.window(0))
+        result = self.solver.solve(lp.x0, lp.params, initial_guess(lp))
+        total, first_s, iterations, solves, status = result.solve_s, result.solve_s, result.iterations, 1, "cold"
+        room = self.lp.hold_knots[1] - self.lp.hold_knots[0]
+        if not self._acceptable(result) and self.hold_knots > room:
+            self.hold_knots, self.task, status = room, self.lp, "hold_shortened"
+            result = self.solver.solve(lp.x0, self.window(0), initial_guess(lp.with_hold(self.hold_s)))
+            total, iterations, solves = total + result.solve_s, iterations + result.iterations, solves + 1
+        if not self._acceptable(result) and self.hold_knots > 0:
+            estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
+            best_lp, best, probes, probe_s = longest_feasible_hold(lp.with_hold(self.hold_s), self.solver, estimate)
+            solves, total = solves + probes, total + probe_s
+            if best is not None:
+                log.info("requested hold %.1f s infeasible from the estimated state; planning %.1f s",
+                         self.hold_s, best_lp.hold_s)
+                self.hold_knots, result, status = best_lp.hold_knots[1] - best_lp.hold_knots[0], best, "hold_shortened"
+                iterations += best.iterations
+        if not self._acceptable(result):
+            log.warning("no feasible initial plan (%s); applying the best iterate", result.status)
+            status = "fallback"
+        self.plan, self.plan_age, self.k = result, 0, 0
+        return ControlStep(self._clip(result.us[0]), status, result.status, total, first_s, iterations, solves,
+                           self.hold_s, result.cost)
+
+    def step(self, x_est: np.ndarray) -> ControlStep:
+        """Advance one knot and re-solve from ``x_est``, warm-started from the shifted plan."""
+        if self.plan is None:
+            raise RuntimeError("call start() before step()")
+        self.k += 1
+        age = self.plan_age + 1
+        warm = self.warm_start(age)
+        result = self.solver.solve(x_est, self.window(), warm)
+        results, status = [result], "solved"
+        while not self._acceptable(result) and len(results) <= self.settings.max_retries and self._shorten():
+            result = self.solver.solve(x_est, self.window(), warm)
+            results.append(result)
+            status = "hold_shortened"
+        if self._acceptable(result):
+            self.plan, self.plan_age = result, 0
+            current = result.us[0]
+            if status == "hold_shortened":
+                log.info("t = %.1f s: hold shortened to %.1f s", self.k * self.lp.settings.dt_s, self.hold_s)
+        else:
+            self.plan_age, status = age, "fallback"
+            current = self._fallback(x_est, age)
+            log.warning("t = %.1f s: re-solve failed (%s, violation %.2e); previous plan's control with feedback",
+                        self.k * self.lp.settings.dt_s, result.status, result.max_constraint_violation)
+        return ControlStep(self._clip(current), status, result.status, sum(r.solve_s for r in results),
+                           results[0].solve_s, sum(r.iterations for r in results), len(results), self.hold_s,
+                           result.cost)
+
+    def warm_start(self, shift: int = 1) -> WarmStart:
+        """The plan shifted by ``shift`` knots with its multipliers; the AL penalty is capped at
+        ``settings.warm_penalty_max`` (a penalty grown near infeasibility would leave the next problems
+        ill-conditioned)."""
+        warm = WarmStart.from_result(self.plan, shift=min(shift, self.lp.problem.horizon))
+        multipliers = dict(warm.multipliers)
+        if "penalty" in multipliers:
+            multipliers["penalty"] = min(float(multipliers["penalty"]), self.settings.warm_penalty_max)
+        return WarmStart(warm.xs, warm.us, multipliers)
+
+    def _shorten(self) -> bool:
+        """Move the start of the lowering earlier by ``hold_step_s`` (never into the past)."""
+        step = max(1, int(round(self.settings.hold_step_s / self.lp.settings.dt_s)))
+        shortest = max(0, self.k - self.lift_knots)
+        new = max(shortest, self.hold_knots - step)
+        if new >= self.hold_knots:
+            return False
+        self.hold_knots = new
+        return True
+
+    def _fallback(self, x_est: np.ndarray, age: int) -> np.ndarray:
+        plan = self.plan
+        j = min(age, plan.us.shape[0] - 1)
+        u = plan.us[j].copy()
+        if plan.K is not None:
+            u = u + plan.K[j] @ (np.asarray(x_est, float) - plan.xs[j])
+        return u
+
+    def _clip(self, current) -> np.ndarray:
+        pr = self.lp.problem
+        return np.clip(np.asarray(current, float).reshape(-1), pr.u_lb, pr.u_ub)
