@@ -72,3 +72,16 @@ def test_non_finite_model_is_a_status_not_nan():
     assert not res.success and res.status == "numerical_error"
     assert np.all(np.isfinite(res.xs)) and not np.isnan(res.cost)
     assert not np.isnan(res.max_constraint_violation)
+
+
+def test_warm_start_shift_keeps_the_horizon_length():
+    import numpy as np
+
+    from thermo_ddp.solvers import SolverResult, WarmStart
+
+    res = SolverResult("ddp", True, "converged", "", np.arange(4.0)[:, None], np.arange(3.0)[:, None], 0.0, 0.0,
+                       1, 0.0)
+    for shift in (1, 3, 10):
+        warm = WarmStart.from_result(res, shift=shift)
+        assert warm.xs.shape == (4, 1) and warm.us.shape == (3, 1)
+        assert warm.xs[-1, 0] == 3.0 and warm.xs[0, 0] == min(shift, 3)

@@ -50,7 +50,7 @@ def test_ode_jacobian(joints):
         _check(model.ode, model, x, u)
 
 
-@pytest.mark.parametrize("integrator", ["rk4", "implicit_euler"])
+@pytest.mark.parametrize("integrator", ["rk4", "rk4_4", "implicit_euler"])
 def test_step_jacobians(integrator):
     model = load_model(("arm_left_3_joint", "arm_left_4_joint"), payload_kg=20.0)
     step = model.step(0.01, integrator)

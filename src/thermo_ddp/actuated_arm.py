@@ -17,7 +17,7 @@ import numpy as np
 from . import motor
 from .arm import Arm, ArmSettings, build_arm
 from .errors import InputError
-from .integrators import make_step, rk4_step_jacobians, step_jacobians
+from .integrators import make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
 from .parameters import JointParameters, load_parameters, parameters_from_dict
 from .rigid_body import RigidBodyDynamics
 from .thermal import ThermalNetwork, network_from_parameters
@@ -119,8 +119,9 @@ class ActuatedArm:
 
     def step_jacobians(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
         """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)``."""
-        if integrator == "rk4":
-            return rk4_step_jacobians(self.ode_jacobians, dt_s)
+        substeps = rk4_substeps(integrator)
+        if substeps is not None:
+            return rk4_step_jacobians(self.ode_jacobians, dt_s, substeps)
         return step_jacobians(self.step(dt_s, integrator))
 
     def static_current_a(self, q) -> np.ndarray:

@@ -4,7 +4,17 @@ from __future__ import annotations
 
 import casadi as ca
 
-INTEGRATORS = ("rk4", "implicit_euler")
+INTEGRATORS = ("rk4", "rk4_<m>", "implicit_euler")
+
+
+def rk4_substeps(integrator: str) -> int | None:
+    """``"rk4"`` -> 1, ``"rk4_4"`` -> 4 sub-steps per step; None for other integrators."""
+    if integrator == "rk4":
+        return 1
+    head, _, count = integrator.partition("_")
+    if head == "rk4" and count.isdigit() and int(count) >= 1:
+        return int(count)
+    return None
 
 
 def rk4_step(ode: ca.Function, dt: float, substeps: int = 1) -> ca.Function:
@@ -36,17 +46,16 @@ def implicit_euler_step(ode: ca.Function, dt: float, newton_iterations: int = 4)
 
 
 def make_step(ode: ca.Function, dt: float, integrator: str = "rk4") -> ca.Function:
-    if integrator == "rk4":
-        return rk4_step(ode, dt)
+    """``integrator``: "rk4", "rk4_<m>" (m RK4 sub-steps of dt/m) or "implicit_euler"."""
+    substeps = rk4_substeps(integrator)
+    if substeps is not None:
+        return rk4_step(ode, dt, substeps)
     if integrator == "implicit_euler":
         return implicit_euler_step(ode, dt)
-    raise ValueError(f"integrator {integrator!r}: choose one of {INTEGRATORS}")
+    raise ValueError(f"integrator {integrator!r}: choose one of {', '.join(INTEGRATORS)}")
 
 
-def rk4_step_jacobians(ode_jacobians: ca.Function, dt: float) -> ca.Function:
-    """RK4 step and its Jacobians by the chain rule through the four stages, from
-    ``ode_jacobians(x, u, p) -> (xdot, dxdot_dx, dxdot_du)`` (equal to AD of the RK4 step)."""
-    x, u, p = (ca.SX.sym(n, ode_jacobians.size1_in(i)) for i, n in enumerate(ode_jacobians.name_in()))
+def _rk4_jacobians_once(ode_jacobians: ca.Function, dt: float, x, u, p):
     eye = ca.SX.eye(x.numel())
     f, kx, ku = ode_jacobians(x, u, p)
     fs, kxs, kus = [f], [kx], [ku]
@@ -56,9 +65,20 @@ def rk4_step_jacobians(ode_jacobians: ca.Function, dt: float) -> ca.Function:
         kus.append(a @ (dt * c * kus[-1]) + b)
         fs.append(f)
     w = (1 / 6, 1 / 3, 1 / 3, 1 / 6)
-    xn = x + dt * sum(wi * fi for wi, fi in zip(w, fs))
-    a = eye + dt * sum(wi * ki for wi, ki in zip(w, kxs))
-    b = dt * sum(wi * ki for wi, ki in zip(w, kus))
+    return (x + dt * sum(wi * fi for wi, fi in zip(w, fs)), eye + dt * sum(wi * ki for wi, ki in zip(w, kxs)),
+            dt * sum(wi * ki for wi, ki in zip(w, kus)))
+
+
+def rk4_step_jacobians(ode_jacobians: ca.Function, dt: float, substeps: int = 1) -> ca.Function:
+    """RK4 step (``substeps`` sub-steps) and its Jacobians by the chain rule through the stages, from
+    ``ode_jacobians(x, u, p) -> (xdot, dxdot_dx, dxdot_du)`` (equal to AD of the RK4 step)."""
+    x, u, p = (ca.SX.sym(n, ode_jacobians.size1_in(i)) for i, n in enumerate(ode_jacobians.name_in()))
+    one = ca.SX.sym("xs", x.numel())
+    sub = ca.Function("rk4_substep", [one, u, p], list(_rk4_jacobians_once(ode_jacobians, dt / substeps, one, u, p)))
+    xn, a, b = x, ca.SX.eye(x.numel()), ca.SX.zeros(x.numel(), u.numel())
+    for _ in range(substeps):
+        xn, ak, bk = sub(xn, u, p)
+        a, b = ak @ a, ak @ b + bk
     return ca.Function("step_jacobians", [x, u, p], [xn, a, b], ode_jacobians.name_in(), ["x_next", "A", "B"])
 
 

@@ -82,7 +82,8 @@ class WarmStart:
             a = np.asarray(a)
             if shift == 0 or a.ndim == 0 or a.shape[0] <= 1:
                 return a.copy()
-            return np.concatenate([a[shift:], np.repeat(a[-1:], shift, axis=0)])
+            s = min(shift, a.shape[0] - 1)  # never shorter than the horizon
+            return np.concatenate([a[s:], np.repeat(a[-1:], s, axis=0)])
 
         keep = ("constraints", "penalty", "terminal_constraints")
         mult = {k: move(v) if k == "constraints" else np.array(v, copy=True)
