@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 
 from thermo_ddp.actuated_arm import load_model, model_from_dict
-from thermo_ddp.arm import ELBOW, LEFT_ARM, PAYLOAD_FRAME
+from thermo_ddp.arm import ELBOW, LEFT_ARM
 from thermo_ddp.errors import InputError
 from thermo_ddp.recordings import TopicMap, read_bag_joints
 from thermo_ddp.whole_arm import (WholeArmSettings, evaluate_posture, gravity_torque_function, hold_temperatures,
@@ -38,7 +38,7 @@ def posture4(arm4):
 def test_payload_point_gravity_and_currents_match_pinocchio(arm4):
     pm, data = arm4.arm.model, arm4.arm.model.createData()
     point, grav, cur = payload_point_function(arm4), gravity_torque_function(arm4), static_current_function(arm4)
-    fid = pm.getFrameId(PAYLOAD_FRAME)
+    fid = pm.getFrameId(arm4.arm.payload_frame)
     rng = np.random.default_rng(1)
     for q in rng.uniform(pm.lowerPositionLimit, pm.upperPositionLimit, size=(5, 4)):
         pin.framesForwardKinematics(pm, data, q)

@@ -23,7 +23,7 @@ log = logging.getLogger(__name__)
 ROBOT_URDF = "talos_data/robots/talos_reduced.urdf"
 LEFT_ARM = tuple(f"arm_left_{i}_joint" for i in range(1, 8))
 ELBOW = "arm_left_4_joint"
-PAYLOAD_FRAME = "arm_left_4_link"
+WRIST = "arm_left_7_joint"  # joints 5-7 share one origin, the wrist centre
 GRIPPER_FRAME = "gripper_left_base_link"
 GRIPPER_LEVER_M = 0.357  # elbow axis to gripper_left_base_link in talos_reduced.urdf: 0.3573 m
 
@@ -73,6 +73,7 @@ class Arm:
     settings: ArmSettings
     model: pin.Model
     locked_joints: Mapping[str, float]
+    payload_frame: str
     payload_translation_m: np.ndarray
 
     @property
@@ -88,19 +89,27 @@ class Arm:
 
     def payload_dict(self) -> dict:
         return {"mass_kg": self.settings.payload_kg, "lever_m": self.settings.payload_lever_m,
-                "frame": PAYLOAD_FRAME, "translation_m": self.payload_translation_m.tolist()}
+                "frame": self.payload_frame, "translation_m": self.payload_translation_m.tolist()}
 
     def gravity_torque_nm(self, q: np.ndarray) -> np.ndarray:
         return pin.computeGeneralizedGravity(self.model, self.model.createData(), np.asarray(q, float))
 
 
-def _forearm_direction(full: pin.Model) -> np.ndarray:
-    """Unit vector from the elbow axis to the gripper, in the elbow frame at the neutral posture."""
+def _payload_placement(full: pin.Model, lever_m: float) -> tuple[str, np.ndarray]:
+    """Body (joint) carrying the payload and the payload's position in its frame.
+
+    The payload sits ``lever_m`` from the elbow axis on the line to the gripper (neutral posture).
+    Beyond the wrist centre it is held by the hand, so it moves with the wrist joints when they are
+    planned; otherwise it hangs on the forearm. Locked joints make both the same rigid body.
+    """
     data = full.createData()
     pin.framesForwardKinematics(full, data, pin.neutral(full))
-    elbow = data.oMi[full.getJointId(ELBOW)]
-    p = elbow.actInv(data.oMf[full.getFrameId(GRIPPER_FRAME)]).translation
-    return p / np.linalg.norm(p)
+    elbow, wrist = data.oMi[full.getJointId(ELBOW)], data.oMi[full.getJointId(WRIST)]
+    to_gripper = elbow.actInv(data.oMf[full.getFrameId(GRIPPER_FRAME)]).translation
+    point = lever_m * to_gripper / np.linalg.norm(to_gripper)
+    if lever_m > np.linalg.norm(elbow.actInv(wrist).translation):
+        return WRIST, wrist.actInv(elbow.act(point))
+    return ELBOW, point
 
 
 def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str, float] | None = None) -> Arm:
@@ -114,12 +123,10 @@ def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str
     for j, angle in settings.posture.items():
         q_lock[full.joints[full.getJointId(j)].idx_q] = angle
     lock_ids = [full.getJointId(n) for n in names if n not in settings.joints]
-    direction = _forearm_direction(full)
-    translation = settings.payload_lever_m * direction
+    carrier, translation = _payload_placement(full, settings.payload_lever_m)
     if settings.payload_kg > 0:
-        # The payload hangs on the forearm: fixed to the elbow's body, locked wrist or not.
-        full.appendBodyToJoint(full.getJointId(ELBOW), pin.Inertia(settings.payload_kg, translation,
-                                                                   np.zeros((3, 3))), pin.SE3.Identity())
+        full.appendBodyToJoint(full.getJointId(carrier), pin.Inertia(settings.payload_kg, translation,
+                                                                     np.zeros((3, 3))), pin.SE3.Identity())
     model = pin.buildReducedModel(full, lock_ids, q_lock)
     order = [list(model.names).index(j) for j in settings.joints]
     if order != sorted(order):
@@ -128,4 +135,4 @@ def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str
         model.armature[model.getJointId(j) - 1] = value
     locked = {full.names[i]: float(q_lock[full.joints[i].idx_q]) for i in lock_ids}
     log.debug("arm %s, payload %.1f kg at %s", settings.joints, settings.payload_kg, translation)
-    return Arm(settings, model, locked, translation)
+    return Arm(settings, model, locked, carrier.replace("_joint", "_link"), translation)

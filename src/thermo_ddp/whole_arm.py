@@ -45,7 +45,7 @@ from tqdm.auto import tqdm
 from . import motor
 from ._config import require, settings_from_mapping
 from .actuated_arm import ActuatedArm, default_parameter_file, load_model
-from .arm import ELBOW, LEFT_ARM, PAYLOAD_FRAME
+from .arm import ELBOW, LEFT_ARM
 from .errors import InputError
 from .ocp import Constraint, Cost, OptimalControlProblem
 from .parameters import JointParameters, load_parameters
@@ -146,7 +146,7 @@ def payload_point_function(model: ActuatedArm) -> ca.Function:
         place, parent = pm.jointPlacements[i], pm.parents[i]
         pos[i] = pos[parent] + rot[parent] @ ca.DM(place.translation)
         rot[i] = rot[parent] @ ca.DM(place.rotation) @ _rotation(_AXES[kind], q[i - 1])
-    frame = pm.frames[pm.getFrameId(PAYLOAD_FRAME)]
+    frame = pm.frames[pm.getFrameId(model.arm.payload_frame)]
     parent = frame.parentJoint
     local = frame.placement.act(model.arm.payload_translation_m)
     point = pos[parent] + rot[parent] @ ca.DM(local)
