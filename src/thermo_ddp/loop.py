@@ -1,0 +1,629 @@
+"""Close the loop: robot recordings -> identification -> diagnosis -> improved model -> plan ->
+receding-horizon execution on the robot, for the report's ORIGINAL model and the IMPROVED one.
+
+The "robot" is the testbed's simulated elbow (``thermo_ddp.testbed``) with its concealed physics on:
+friction heating and drive heat. It "records" the seed report's three experiments (section 4.3); the
+tool identifies the report's one-node model (the ORIGINAL: eq. 7 with R(T), constant ambient, no
+friction heat), diagnoses the misfit and writes the IMPROVED parameter file. Both are then used to
+plan the 40 kg lift under 84 °C and 140 °C (:func:`thermo_ddp.lift.plan_lift`) and to run it in
+closed loop (EKF + receding-horizon DDP of :mod:`thermo_ddp.mpc`) on a plant that carries the
+robot's TRUE physics (:func:`truth_model`).
+
+Truth mapping (testbed ``PlantParameters`` -> the plant's ``JointParameters`` and network):
+- motor: gear ratio, torque constant, rotor inertia, R(T) (resistance, reference, copper alpha),
+  viscous and Coulomb friction and the tanh smoothing are the testbed's; back-EMF (K_b = K_m),
+  bus voltage and current ratings, which the testbed does not model, come from the elbow file;
+- thermal: the testbed's winding/casing/drive capacities, resistances, drive idle and i^2 losses,
+  ambient = the testbed room; the friction heat is split as in the testbed (``friction_to_winding``
+  into the winding, the rest into the casing): the plant gets its own network with two friction
+  sources, while the contract file (``friction_heating_fraction``) can only send it to the casing;
+- not carried over: the testbed's 0.2 N·m effort offset and its pendulum forearm (mass, COM,
+  inertia): the closed-loop plant's rigid body is the Talos URDF forearm with the payload at the
+  gripper, the same as the planner's, so the closed loop compares thermal models only.
+
+The original model's sensor node is its winding (the report assumed the sensor reads the winding);
+the project's EKF measures a ``casing`` node, so the original model is observed by
+:class:`SensorNodeFilter`, the same filter with the measured node taken from the network.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ._config import require, settings_from_mapping
+from .actuated_arm import ActuatedArm, _build_functions, default_parameter_file, load_model
+from .arm import ELBOW, ArmSettings, build_arm
+from .diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
+from .identify.thermal import parameter_file
+from .lift import LiftPlan, LiftSettings, plan_lift
+from .mpc import ExtendedKalmanFilter, MPCSettings, ObserverSettings, Plant, RecedingHorizonController, \
+    planning_problem
+from .mpc.plant import Measurement
+from .parameters import JointParameters, load_parameters, parameters_from_dict, save_parameters
+from .testbed import Ambient, PlantParameters, SimulatedRecording, biceps, static_3a, static_4a
+from .thermal import AMBIENT, HeatSource, Link, ThermalNetwork
+
+log = logging.getLogger(__name__)
+_SRC = "loop"
+MODELS = ("original", "improved")
+ORACLE = "truth"  # the robot's own parameter file as the planner's model: what perfect knowledge achieves
+
+
+# ----------------------------------------------------------------------------- settings
+@dataclasses.dataclass(frozen=True)
+class LoopSettings:
+    """The whole chain. Experiments: the report's durations (heating ``heating_s``, the biceps curl half
+    of it, cooling ``cooling_s``); the lift: ``payload_kg`` at the gripper, hold ``hold_s`` requested of
+    the planner and of the closed loop, each winding limit of ``limits_c``; the closed loop: the
+    planner backs off ``backoff_c`` from the limit, ``horizon_knots`` knots of 0.1 s (None: the whole
+    task, lift + hold + lower + settle; a shorter window cannot plan a hold that outlasts it, its
+    terminal return constraint contradicts the hold band), sensor ``seed``. ``oracle``: also plan and
+    execute with the robot's true parameter file (the best any identified model can do)."""
+
+    payload_kg: float = 40.0
+    limits_c: tuple[float, ...] = (84.0, 140.0)
+    hold_s: float = 60.0
+    heating_s: float = 7200.0
+    cooling_s: float = 5400.0
+    backoff_c: float = 1.0
+    horizon_knots: int | None = None
+    seed: int = 0
+    oracle: bool = True
+    progress: bool | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "limits_c", tuple(float(v) for v in self.limits_c))
+        require(len(self.limits_c) > 0, _SRC, "limits_c", self.limits_c, "give at least one winding limit")
+        for name in ("payload_kg", "hold_s", "heating_s", "cooling_s"):
+            value = getattr(self, name)
+            require(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, _SRC, name, value,
+                    "expected a finite number > 0")
+        require(self.heating_s >= 600 and self.cooling_s >= 600, _SRC, "heating_s/cooling_s",
+                (self.heating_s, self.cooling_s), "experiments need >= 600 s of heating and of cooling")
+
+    @classmethod
+    def short(cls, **options) -> "LoopSettings":
+        """Short experiments (30 min heating and cooling), a 45 s requested hold (still longer than the
+        robot can hold 40 kg under 140 °C) and no oracle, for tests and the notebook's quick run."""
+        defaults = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
+        return settings_from_mapping(cls, defaults | options, _SRC)
+
+    @property
+    def models(self) -> tuple[str, ...]:
+        return MODELS + ((ORACLE,) if self.oracle else ())
+
+
+# ----------------------------------------------------------------------------- the robot
+def robot_parameters() -> PlantParameters:
+    """The simulated robot elbow: testbed defaults with friction heating and drive heat."""
+    return PlantParameters().with_effects("both")
+
+
+def record_experiments(robot: PlantParameters, settings: LoopSettings) -> tuple[SimulatedRecording, ...]:
+    """The report's experiments (section 4.3) on the robot: static ~3 A, static ~4 A warm with a bump,
+    biceps curl."""
+    h, c = settings.heating_s, settings.cooling_s
+    return (static_3a(params=robot, heating_s=h, cooling_s=c, loading_s=min(600.0, h / 6), seed=settings.seed),
+            static_4a(params=robot, heating_s=h, cooling_s=c, seed=settings.seed),
+            biceps(params=robot, heating_s=h / 2, cooling_s=c, seed=settings.seed))
+
+
+def truth_parameters(robot: PlantParameters, base: JointParameters | None = None,
+                     ambient: Ambient | None = None) -> JointParameters:
+    """The robot's true parameters as a parameter file (see the module docstring for the mapping).
+    ``friction_heating_fraction`` is the TOTAL share of friction heat in the motor (1 or 0); the
+    split between winding and casing is in :func:`truth_network`."""
+    base = base or load_parameters(default_parameter_file(ELBOW))
+    r = robot
+    motor = {k: getattr(r, k) for k in ("gear_ratio", "torque_constant_nm_per_a", "resistance_ohm",
+                                       "resistance_ref_c", "copper_alpha_per_k", "rotor_inertia_kg_m2",
+                                       "viscous_friction_nm_s_per_rad", "coulomb_friction_nm",
+                                       "coulomb_smoothing_rad_s")}
+    motor["back_emf_v_s_per_rad"] = r.torque_constant_nm_per_a
+    keys = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
+    if r.drive_heating:
+        keys += ("drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w", "drive_idle_w",
+                 "drive_loss_w_per_a2")
+    thermal = {"model": "two_node_drive" if r.drive_heating else "two_node",
+               "ambient_c": (ambient or Ambient()).room_c, **{k: getattr(r, k) for k in keys},
+               "friction_heating_fraction": 1.0 if r.friction_heating else 0.0}
+    data = base.to_dict()
+    data["motor"].update(motor)
+    data["thermal"] = thermal
+    data["sources"] = {"truth": "thermo_ddp.testbed PlantParameters of the simulated robot (hidden from the tool); "
+                                f"friction heat split {r.friction_to_winding:g} winding / "
+                                f"{1 - r.friction_to_winding:g} casing"}
+    return parameters_from_dict(data, "testbed truth")
+
+
+def truth_network(robot: PlantParameters, params: JointParameters) -> ThermalNetwork:
+    """The robot's thermal network: as the contract's, but the friction heat split between the winding
+    (``friction_to_winding``) and the casing, as in the testbed."""
+    th, r = params.thermal, robot
+    fric = float(r.friction_heating)
+    nodes = ("winding", "casing")
+    caps = (th["winding_capacity_j_per_k"], th["casing_capacity_j_per_k"])
+    links = (Link("winding", "casing", th["winding_casing_k_per_w"]),
+             Link("casing", AMBIENT, th["casing_ambient_k_per_w"]))
+    sources = (HeatSource("winding", "joule_w"), HeatSource("winding", "friction_w", fric * r.friction_to_winding),
+               HeatSource("casing", "friction_w", fric * (1 - r.friction_to_winding)))
+    if r.drive_heating:
+        nodes += ("drive",)
+        caps += (th["drive_capacity_j_per_k"],)
+        links += (Link("drive", "casing", th["drive_casing_k_per_w"]),
+                  Link("drive", AMBIENT, th["drive_ambient_k_per_w"]))
+        sources += (HeatSource("drive", "current_sq_a2", th["drive_loss_w_per_a2"], th["drive_idle_w"]),)
+    return ThermalNetwork(nodes, caps, links, sources, sensor_node="casing")
+
+
+def truth_model(robot: PlantParameters, payload_kg: float, base: JointParameters | None = None) -> ActuatedArm:
+    """The closed loop's plant: the Talos elbow with ``payload_kg`` at the gripper and the robot's true
+    motor and thermal network (friction heat split as in the testbed).
+
+    Uses ``actuated_arm._build_functions`` (no public constructor takes a custom network yet)."""
+    params = truth_parameters(robot, base)
+    settings = ArmSettings(joints=(ELBOW,), payload_kg=payload_kg)
+    arm = build_arm(settings, {ELBOW: params.motor.armature_kg_m2})
+    networks = {ELBOW: truth_network(robot, params)}
+    return ActuatedArm(arm, {ELBOW: params}, networks, *_build_functions(arm, {ELBOW: params}, networks))
+
+
+# ----------------------------------------------------------------------------- observer
+class SensorNodeFilter(ExtendedKalmanFilter):
+    """The project's EKF with the measured temperature on the network's ``sensor_node`` (the winding of
+    a one-node model, the casing otherwise). When the model's idle temperature equals ambient (one node,
+    constant ambient: no drive heat), the first sample sets the temperatures by a common offset and the
+    resistance scale starts at 1."""
+
+    def __init__(self, model: ActuatedArm, settings: MPCSettings, observer: ObserverSettings = ObserverSettings()):
+        nets = [model.networks[j] for j in model.joints]
+        sensor = {net.sensor_node for net in nets}
+        require(len(sensor) == 1, "SensorNodeFilter", "sensor_node", sensor, "joints must share one sensor node")
+        self._sensor_node = sensor.pop()
+        if self._sensor_node == "casing":
+            super().__init__(model, settings, observer)
+            return
+        casing_free = _RenamedNodes(model, {"casing": self._sensor_node})
+        super().__init__(casing_free, settings, observer)
+        self.model = model
+
+    def initialise(self, m: Measurement) -> None:
+        model = self.model
+        idle = model.idle_temperatures()
+        rise = idle[np.array(self._casing) - 2 * model.nu] - model.ambient_c
+        if self._sensor_node == "casing" and np.all(np.abs(rise) > 1e-6):
+            return super().initialise(m)
+        if m.casing_c is None:
+            raise ValueError("the observer needs a sensor sample to start")
+        temps = idle + float(np.mean(m.casing_c - idle[np.array(self._casing) - 2 * model.nu]))
+        x = np.concatenate([m.q_rad, m.v_rad_s, temps])
+        self.z = np.append(x, 1.0) if self.augmented else x
+        o = self.observer
+        p0 = np.concatenate([self._r[:2 * model.nu], np.full(model.nx - 2 * model.nu, o.initial_temperature_c ** 2)])
+        self.P = np.diag(np.append(p0, o.initial_resistance_scale ** 2) if self.augmented else p0)
+
+
+class _RenamedNodes:
+    """A read-only view of an ActuatedArm whose ``node_indices`` answers one node name for another
+    (lets the EKF's constructor find the measured node of a network without a casing)."""
+
+    def __init__(self, model: ActuatedArm, alias: dict[str, str]):
+        self._model, self._alias = model, alias
+
+    def __getattr__(self, name: str):
+        return getattr(self._model, name)
+
+    def node_indices(self, node: str) -> list[int]:
+        return self._model.node_indices(self._alias.get(node, node))
+
+
+# ----------------------------------------------------------------------------- closed loop
+@dataclasses.dataclass(frozen=True)
+class ClosedLoopRun:
+    """One receding-horizon execution of the lift on the true plant (names as in ``mpc.ClosedLoopResult``).
+
+    Instants k = 0..K: ``time_s``, true ``winding_c``/``casing_c``/``drive_c``/``q_rad``, the observer's
+    ``estimated_winding_c``, the last ``measured_casing_c``. Periods k -> k+1: ``current_a``, ``solve_s``
+    (all solves of the period), ``step_status``, ``hold_s`` (the planned hold after the period).
+    ``peak_winding_c`` includes the plant's sub-steps."""
+
+    settings: MPCSettings
+    time_s: np.ndarray
+    winding_c: np.ndarray
+    casing_c: np.ndarray
+    drive_c: np.ndarray | None
+    q_rad: np.ndarray
+    estimated_winding_c: np.ndarray
+    measured_casing_c: np.ndarray
+    current_a: np.ndarray
+    solve_s: np.ndarray
+    step_status: tuple[str, ...]
+    hold_s: np.ndarray
+    peak_winding_c: float
+    safety_cutoff_c: float
+    cutoff_tripped: bool
+
+    @property
+    def limit_c(self) -> float:
+        return self.settings.limit_c
+
+    @property
+    def margin_c(self) -> float:
+        """Limit minus the peak TRUE winding (negative: the limit was exceeded)."""
+        return self.limit_c - self.peak_winding_c
+
+    @property
+    def success(self) -> bool:
+        return self.margin_c >= 0 and not self.cutoff_tripped
+
+    @property
+    def status(self) -> str:
+        if self.cutoff_tripped:
+            return "safety_cutoff"
+        return "completed" if self.margin_c >= 0 else "winding_limit_exceeded"
+
+    @property
+    def achieved_hold_s(self) -> float:
+        """The hold executed: the controller's planned hold after the last period."""
+        return float(self.hold_s[-1])
+
+    @property
+    def time_over_limit_s(self) -> float:
+        return float(np.sum(self.winding_c > self.limit_c) * self.settings.control_period_s)
+
+    def warm_solve_s(self) -> np.ndarray:
+        return self.solve_s[1:]
+
+
+def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path) -> MPCSettings:
+    """The closed loop's settings (the project's MPC defaults otherwise: 0.1 s period, RK4, sensors)."""
+    lift = LiftSettings()
+    task_s = lift.lift_s + settings.hold_s + lift.lower_s + lift.settle_s
+    knots = settings.horizon_knots or int(math.ceil(task_s / MPCSettings().control_period_s - 1e-9))
+    return MPCSettings(payload_kg=settings.payload_kg, limit_c=limit_c, hold_s=settings.hold_s,
+                       backoff_c=settings.backoff_c, horizon_knots=knots, seed=settings.seed,
+                       parameter_file=str(model_file))
+
+
+def execute(model_file: Path, plant_model: ActuatedArm, settings: MPCSettings, progress: bool = False) -> ClosedLoopRun:
+    """Receding-horizon lift with the planner's model from ``model_file`` on ``plant_model`` (the truth):
+    the composition of ``mpc.run_closed_loop`` with a given plant and :class:`SensorNodeFilter`."""
+    model = load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files={ELBOW: model_file})
+    lp = planning_problem(settings, model)
+    controller = RecedingHorizonController(lp, settings)
+    plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad]), settings,
+                  np.random.default_rng(settings.seed))
+    observer = SensorNodeFilter(model, settings)
+    m = plant.measure()
+    while m.casing_c is None:
+        plant.apply(np.zeros(model.nu))
+        m = plant.measure()
+    observer.initialise(m)
+    rows: dict[str, list] = {k: [] for k in ("x", "est", "casing", "steps")}
+    casing, tripped = m.casing_c.copy(), False
+
+    def instant():
+        rows["x"].append(plant.x.copy())
+        rows["est"].append(float(observer.winding_c[0]))
+        rows["casing"].append(float(casing[0]))
+
+    instant()
+    steps = controller.task_knots + int(round(settings.extra_s / settings.control_period_s))
+    for k in tqdm(range(steps), desc=f"closed loop {model_file.stem} {settings.limit_c:g} °C", unit="period",
+                  disable=not progress, leave=False):
+        x0 = observer.state
+        step = controller.start(x0) if k == 0 else controller.step(x0)
+        plant.apply(step.current_a)
+        rows["steps"].append(step)
+        m = plant.measure()
+        observer.predict(m.current_a)
+        observer.update(m)
+        casing = m.casing_c.copy() if m.casing_c is not None else casing
+        instant()
+        if m.casing_c is not None and np.any(m.casing_c >= plant.safety_cutoff_c):
+            tripped = True
+            log.warning("t = %.1f s: measured casing %.1f °C: safety cut-off", plant.time_s, m.casing_c.max())
+            break
+    return _run(settings, plant, rows, tripped)
+
+
+def _run(settings: MPCSettings, plant: Plant, rows: dict, tripped: bool) -> ClosedLoopRun:
+    model, xs, steps = plant.model, np.array(rows["x"]), rows["steps"]
+
+    def node(name):
+        return xs[:, model.node_indices(name)[0]]
+
+    drive = node("drive") if "drive" in model.networks[model.joints[0]].nodes else None
+    return ClosedLoopRun(settings, np.arange(xs.shape[0]) * settings.control_period_s, node("winding"),
+                         node("casing"), drive, xs[:, 0], np.array(rows["est"]), np.array(rows["casing"]),
+                         np.array([s.current_a[0] for s in steps]), np.array([s.solve_s for s in steps]),
+                         tuple(s.status for s in steps), np.array([s.hold_s for s in steps]),
+                         float(plant.peak_winding_c), plant.safety_cutoff_c, tripped)
+
+
+# ----------------------------------------------------------------------------- the chain
+@dataclasses.dataclass(frozen=True)
+class Execution:
+    """One model under one limit: the open-loop plan and the closed-loop run on the robot."""
+
+    model: str
+    limit_c: float
+    plan: LiftPlan
+    run: ClosedLoopRun
+
+    def row(self) -> dict[str, Any]:
+        r, p = self.run, self.plan
+        warm = r.warm_solve_s()
+        return {"model": self.model, "limit_c": self.limit_c, "thermal_model": p.model.params[ELBOW].thermal.model,
+                "requested_hold_s": p.settings.hold_s, "planned_hold_s": p.achieved_hold_s,
+                "plan_status": p.status, "plan_peak_winding_c": float(p.series("winding_c").max()),
+                "plan_solve_s": float(p.solver["total_solve_s"]),
+                "closed_loop_hold_s": r.achieved_hold_s, "closed_loop_status": r.status,
+                "peak_true_winding_c": r.peak_winding_c, "margin_c": r.margin_c,
+                "time_over_limit_s": r.time_over_limit_s,
+                "peak_estimated_winding_c": float(r.estimated_winding_c.max()),
+                "peak_measured_casing_c": float(r.measured_casing_c.max()),
+                "cutoff_trips": int(r.cutoff_tripped),
+                "warm_solve_median_ms": 1e3 * float(np.median(warm)) if warm.size else None,
+                "period_solve_max_ms": 1e3 * float(r.solve_s.max()),
+                "fallback_periods": r.step_status.count("fallback")}
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopResult:
+    """The chain's outcome: recordings, diagnosis, the two parameter files, every execution."""
+
+    settings: LoopSettings
+    robot: PlantParameters
+    recordings: tuple[SimulatedRecording, ...]
+    recording_files: tuple[Path, ...]
+    diagnosis: ThermalDiagnosis
+    model_files: dict[str, Path]
+    executions: tuple[Execution, ...]
+
+    @property
+    def success(self) -> bool:
+        return self.diagnosis.success and all(e.run.success for e in self.executions if e.model == "improved")
+
+    @property
+    def status(self) -> str:
+        return "ok" if self.success else "improved_model_failed"
+
+    @property
+    def message(self) -> str:
+        return "; ".join(c["statement"] for c in self.claims())
+
+    def execution(self, model: str, limit_c: float) -> Execution:
+        return next(e for e in self.executions if e.model == model and e.limit_c == float(limit_c))
+
+    def rows(self) -> list[dict[str, Any]]:
+        return [e.row() for e in self.executions]
+
+    def claims(self) -> list[dict[str, Any]]:
+        """Per limit, what the improved model buys over the original, in numbers (see :func:`claim`)."""
+        out = []
+        for lim in self.settings.limits_c:
+            c = claim(lim, *(self.execution(m, lim).row() for m in MODELS))
+            if self.settings.oracle:
+                extra = oracle_claim(self.execution("improved", lim).row(), self.execution(ORACLE, lim).row())
+                c |= {k: v for k, v in extra.items() if k != "statement"}
+                c["statement"] += extra["statement"]
+            out.append(c)
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        d = self.diagnosis.to_dict()
+        return {"success": self.success, "status": self.status, "message": self.message,
+                "settings": dataclasses.asdict(self.settings),
+                "recordings": [str(p) for p in self.recording_files],
+                "diagnosis": {"missing_physics": [m["term"] for m in d["missing_physics"]],
+                              "baseline_model": d["baseline"]["model"], "final_model": d["final"]["model"],
+                              "rmse_before": d["validation"]["rmse_before"],
+                              "rmse_after": d["validation"]["rmse_after"]},
+                "model_files": {k: str(v) for k, v in self.model_files.items()},
+                "rows": self.rows(), "claims": self.claims()}
+
+    def table(self) -> str:
+        head = (f"{self.settings.payload_kg:g} kg lift, requested hold {self.settings.hold_s:g} s; closed loop "
+                f"on the robot's true physics\n{'model':>9} {'limit':>6} {'planned s':>10} {'executed s':>11} "
+                f"{'peak true':>10} {'margin K':>9} {'over s':>7} {'est. peak':>10} {'trips':>6} "
+                f"{'plan s':>7} {'warm ms':>8} {'max ms':>7}")
+        lines = [f"{r['model']:>9} {r['limit_c']:6.0f} {r['planned_hold_s']:10.1f} {r['closed_loop_hold_s']:11.1f} "
+                 f"{r['peak_true_winding_c']:10.1f} {r['margin_c']:9.2f} {r['time_over_limit_s']:7.1f} "
+                 f"{r['peak_estimated_winding_c']:10.1f} {r['cutoff_trips']:6d} {r['plan_solve_s']:7.2f} "
+                 f"{r['warm_solve_median_ms'] or float('nan'):8.2f} {r['period_solve_max_ms']:7.1f}"
+                 for r in self.rows()]
+        return "\n".join([head, *lines])
+
+    def report(self) -> str:
+        d = self.to_dict()["diagnosis"]
+        return "\n".join([f"close the loop: {self.status}",
+                          f"diagnosis: {d['baseline_model']} -> {d['final_model']}, missing physics "
+                          f"{', '.join(d['missing_physics']) or 'none'}, held-out rmse {d['rmse_before']:.3f} -> "
+                          f"{d['rmse_after']:.3f} K", self.table(), *(c["statement"] for c in self.claims())])
+
+    def plot(self, path: str | Path) -> Path:
+        """Per limit: true and estimated winding, current, measured casing, for both models."""
+        return plot_loop(self, Path(path))
+
+    def plot_summary(self, path: str | Path) -> Path:
+        """Bars: planned and executed hold, margin to the limit, per model and limit."""
+        return plot_summary(self, Path(path))
+
+
+def claim(limit_c: float, original: dict[str, Any], improved: dict[str, Any]) -> dict[str, Any]:
+    """The comparison of two table rows under one limit: does the original break the limit, does the
+    improved hold it, and otherwise how much margin and hold the original wastes."""
+    o, i = original, improved
+    violates = o["margin_c"] < 0
+    out = {"limit_c": limit_c, "original_violates": violates,
+           "improved_holds": i["margin_c"] >= 0 and not i["cutoff_trips"],
+           "original_margin_c": o["margin_c"], "improved_margin_c": i["margin_c"],
+           "original_hold_s": o["closed_loop_hold_s"], "improved_hold_s": i["closed_loop_hold_s"],
+           "wasted_margin_c": None if violates else o["margin_c"] - i["margin_c"],
+           "hold_gain_s": i["closed_loop_hold_s"] - o["closed_loop_hold_s"]}
+    improved_text = f"the improved model holds {i['closed_loop_hold_s']:.1f} s with {i['margin_c']:.2f} K margin"
+    if violates:
+        out["statement"] = (f"{limit_c:g} °C: the original model's closed loop breaks the limit (true winding "
+                            f"{o['peak_true_winding_c']:.1f} °C, {-o['margin_c']:.1f} K over, for "
+                            f"{o['time_over_limit_s']:.1f} s; its estimate peaked at "
+                            f"{o['peak_estimated_winding_c']:.1f} °C); {improved_text}")
+    else:
+        out["statement"] = (f"{limit_c:g} °C: the original model is conservative: it holds "
+                            f"{o['closed_loop_hold_s']:.1f} s with {o['margin_c']:.1f} K margin; {improved_text} "
+                            f"(the original wastes {out['wasted_margin_c']:.1f} K of margin and "
+                            f"{out['hold_gain_s']:.1f} s of hold)")
+    if not out["improved_holds"]:
+        out["statement"] += "; the improved model FAILED to hold the limit"
+    return out
+
+
+def oracle_claim(improved: dict[str, Any], truth: dict[str, Any]) -> dict[str, Any]:
+    """How far the improved model is from the planner that knows the robot's true parameters
+    (``statement``: a clause to append to :func:`claim`'s)."""
+    share = improved["closed_loop_hold_s"] / truth["closed_loop_hold_s"] if truth["closed_loop_hold_s"] > 0 else None
+    text = (f"; with the TRUE parameters the closed loop holds {truth['closed_loop_hold_s']:.1f} s with "
+            f"{truth['margin_c']:.2f} K margin")
+    if share is not None:
+        text += f" (the improved model gets {100 * share:.0f} % of that hold)"
+    return {"oracle_hold_s": truth["closed_loop_hold_s"], "oracle_margin_c": truth["margin_c"],
+            "improved_hold_share_of_oracle": share, "statement": text}
+
+
+# ----------------------------------------------------------------------------- figures
+_COLORS = {"original": "tab:blue", "improved": "tab:green", ORACLE: "tab:gray"}
+
+
+def plot_loop(result: LoopResult, path: Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    limits = result.settings.limits_c
+    fig, axes = plt.subplots(3, len(limits), figsize=(7 * len(limits), 10), sharex="col", squeeze=False)
+    for c, lim in enumerate(limits):
+        ax = axes[:, c]
+        for model in result.settings.models:
+            e, color = result.execution(model, lim), _COLORS[model]
+            r = e.run
+            ax[0].plot(r.time_s, r.winding_c, c=color, label=f"{model}: true winding (peak {r.peak_winding_c:.1f} °C)")
+            ax[0].plot(r.time_s, r.estimated_winding_c, c=color, ls="--", label=f"{model}: planner's estimate")
+            ax[1].step(r.time_s[:-1], r.current_a, where="post", c=color,
+                       label=f"{model}: current (hold {r.achieved_hold_s:.1f} s)")
+            ax[2].plot(r.time_s, r.measured_casing_c, c=color, label=f"{model}: measured casing")
+        ax[0].axhline(lim, c="k", ls="--", label=f"winding limit {lim:g} °C")
+        ax[0].set(title=f"{result.settings.payload_kg:g} kg lift, winding limit {lim:g} °C (closed loop on the "
+                        "robot's true physics)", ylabel="winding [°C]")
+        ax[1].set(ylabel="current [A]")
+        ax[2].axhline(result.execution("improved", lim).run.safety_cutoff_c, c="r", ls=":", label="safety cut-off")
+        ax[2].set(ylabel="casing sensor [°C]", xlabel="time [s]")
+        for a in ax:
+            a.grid(alpha=0.3)
+            a.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def plot_summary(result: LoopResult, path: Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result.rows()
+    labels = [f"{r['model']}\n{r['limit_c']:g} °C" for r in rows]
+    x = np.arange(len(rows))
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4))
+    ax[0].bar(x - 0.2, [r["planned_hold_s"] for r in rows], 0.4, label="planned (open loop, model)")
+    ax[0].bar(x + 0.2, [r["closed_loop_hold_s"] for r in rows], 0.4, label="executed (closed loop, robot)")
+    ax[0].axhline(result.settings.hold_s, c="grey", ls=":", label="requested")
+    ax[0].set(ylabel="hold [s]")
+    margins = [r["margin_c"] for r in rows]
+    ax[1].bar(x, margins, color=["tab:red" if m < 0 else _COLORS[r["model"]] for m, r in zip(margins, rows)])
+    ax[1].axhline(0.0, c="k", lw=0.8)
+    ax[1].set(ylabel="limit - peak TRUE winding [K] (< 0: limit broken)")
+    for a in ax:
+        a.set_xticks(x, labels)
+        a.grid(alpha=0.3, axis="y")
+    ax[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def identify_models(recording_files, out_dir: Path, settings: LoopSettings) -> tuple[ThermalDiagnosis, dict[str, Path]]:
+    """Diagnose the recordings; write the ORIGINAL (identified one-node baseline, constant ambient, no
+    friction heat) and IMPROVED (diagnosed) parameter files into ``out_dir``."""
+    diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
+    require(diagnosis.success, _SRC, "diagnosis", diagnosis.status, diagnosis.message)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    original = parameter_file(diagnosis.params, diagnosis.baseline_fit, diagnosis.recordings)
+    require(original["thermal"]["model"] == "one_node", _SRC, "baseline", original["thermal"]["model"],
+            "expected the report's one-node baseline")
+    files = {"original": out_dir / f"{ELBOW}_original.toml", "improved": out_dir / f"{ELBOW}_improved.toml"}
+    for name, data in (("original", original), ("improved", diagnosis.to_dict()["parameter_file"])):
+        save_parameters(parameters_from_dict(data, name), files[name])
+    return diagnosis, files
+
+
+def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = None, **options) -> LoopResult:
+    """The whole chain (see the module docstring); recordings and parameter files go into ``out_dir``
+    (a temporary directory when None). Options: the fields of :class:`LoopSettings`."""
+    if settings is None:
+        settings = settings_from_mapping(LoopSettings, options, _SRC)
+    elif options:
+        raise TypeError("give either settings or options, not both")
+    if out_dir is None:
+        out_dir = Path(tempfile.mkdtemp(prefix="thermo-ddp-loop-"))
+    out_dir = Path(out_dir)
+    (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
+    robot = robot_parameters()
+    recordings = record_experiments(robot, settings)
+    files = tuple(r.to_csv(out_dir / "recordings" / f"{r.name}.csv") for r in recordings)
+    diagnosis, model_files = identify_models(files, out_dir / "models", settings)
+    save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
+    plant_model = truth_model(robot, settings.payload_kg)
+    executions = []
+    if settings.oracle:
+        model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
+    cases = [(m, lim) for m in settings.models for lim in settings.limits_c]
+    show = bool(settings.progress)
+    for model, lim in tqdm(cases, desc="plan and execute", unit="case", disable=not show):
+        plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_files[model]))
+        run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model]), show)
+        log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
+                 run.achieved_hold_s, run.margin_c)
+        executions.append(Execution(model, lim, plan, run))
+    return LoopResult(settings, robot, recordings, files, diagnosis, model_files, tuple(executions))
+
+
+def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[str, Any]:
+    """CLI entry (``thermo-ddp loop``): run the chain, write into ``out_dir`` the recordings
+    (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth),
+    the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png) and the table (loop.json);
+    return the table."""
+    out_dir = Path(out_dir)
+    settings = LoopSettings.short(**options) if short else settings_from_mapping(LoopSettings, options, _SRC)
+    result = run_loop(settings, out_dir)
+    (out_dir / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
+    result.diagnosis.plot(out_dir / "diagnosis.png")
+    result.plot(out_dir / "loop.png")
+    result.plot_summary(out_dir / "loop_summary.png")
+    table = result.to_dict()
+    (out_dir / "loop.json").write_text(json.dumps(table, indent=1))
+    return table
+
+
+__all__ = ["ClosedLoopRun", "Execution", "LoopResult", "LoopSettings", "SensorNodeFilter", "claim", "execute",
+           "identify_models", "loop_files", "record_experiments", "robot_parameters", "run_loop", "truth_model",
+           "truth_network", "truth_parameters"]

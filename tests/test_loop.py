@@ -1,0 +1,183 @@
+"""The closed chain: recordings -> identification -> diagnosis -> improved model -> plan -> receding-horizon
+execution on a plant with the robot's TRUE physics.
+
+Oracles: the testbed's own numpy equations (thermal network rate, idle equilibrium) for the truth
+plant; the project's ExtendedKalmanFilter for the sensor-node filter on a casing model; the testbed's
+hidden truth (which effects are on) for the diagnosis; the true winding of the closed-loop plant for
+the limit claims. The end-to-end run is short (30 min experiments, one limit, 20 s hold); the full
+comparison at 84 and 140 °C runs in tests/test_notebook_loop.py.
+"""
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from thermo_ddp.actuated_arm import load_model
+from thermo_ddp.arm import ELBOW
+from thermo_ddp.errors import InputError
+from thermo_ddp.loop import (LoopSettings, SensorNodeFilter, claim, loop_files, mpc_settings, robot_parameters,
+                             truth_model, truth_parameters)
+from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
+from thermo_ddp.mpc.plant import Measurement
+from thermo_ddp.parameters import load_parameters
+from thermo_ddp.testbed import JOINT, PlantParameters, steady_state
+from thermo_ddp.testbed.physics import thermal_network
+
+LIMIT_C = 84.0
+
+
+@pytest.fixture(scope="module")
+def chain(tmp_path_factory):
+    out = tmp_path_factory.mktemp("loop")
+    table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True)
+    return out, table
+
+
+def test_settings_are_validated():
+    with pytest.raises(InputError, match="unknown option"):
+        LoopSettings.short(hold=3.0)
+    with pytest.raises(InputError):
+        LoopSettings(heating_s=100.0)
+    with pytest.raises(InputError):
+        LoopSettings(limits_c=())
+    # the default window spans the whole task (lift 2 s + hold + lower 2 s + settle 0.5 s at 0.1 s)
+    assert mpc_settings(LoopSettings(hold_s=60.0), 84.0, "x.toml").horizon_knots == 645
+
+
+@pytest.mark.parametrize("effects", ["both", "friction", "drive", "none"])
+def test_truth_plant_thermal_rates_match_the_testbed_equations(effects):
+    """The closed-loop plant's thermal ODE equals the testbed's independent numpy network, friction heat
+    split between winding and casing included."""
+    robot = PlantParameters(friction_to_winding=0.3).with_effects(effects)
+    model = truth_model(robot, payload_kg=40.0)
+    net = thermal_network(robot)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        temps = rng.uniform(25, 120, size=len(robot.node_names))
+        q, v, i = rng.uniform(-2, 0), rng.uniform(-2, 2), rng.uniform(-15, 15)
+        xdot = np.array(model.ode(np.concatenate([[q, v], temps]), [i], 26.0)).ravel()
+        tau_f = robot.viscous_friction_nm_s_per_rad * v + robot.coulomb_friction_nm * np.tanh(
+            v / robot.coulomb_smoothing_rad_s)
+        want = net.rate(temps, i, abs(tau_f * v), 26.0)
+        assert np.allclose(xdot[2:], want, rtol=1e-10, atol=1e-10)
+    # the idle state (robot powered, motor unloaded) is the testbed's equilibrium: casing ~43 °C with the drive
+    assert np.allclose(model.idle_temperatures(), steady_state(robot, 0.0, 0.0, 26.0), atol=1e-9)
+
+
+def test_truth_parameter_file_carries_the_robot_values():
+    robot = robot_parameters()
+    p = truth_parameters(robot)
+    assert p.joint == JOINT == ELBOW and p.thermal.model == "two_node_drive"
+    assert p.thermal["winding_capacity_j_per_k"] == robot.winding_capacity_j_per_k
+    assert p.thermal["drive_idle_w"] == robot.drive_idle_w and p.thermal["friction_heating_fraction"] == 1.0
+    assert p.motor.coulomb_smoothing_rad_s == robot.coulomb_smoothing_rad_s
+    assert truth_parameters(robot.with_effects("none")).thermal.model == "two_node"
+
+
+def test_claim_tells_a_violation_from_wasted_margin():
+    row = {"margin_c": 2.0, "cutoff_trips": 0, "closed_loop_hold_s": 10.0, "peak_true_winding_c": 82.0,
+           "time_over_limit_s": 0.0, "peak_estimated_winding_c": 83.0}
+    broken = claim(84.0, dict(row, margin_c=-11.0, peak_true_winding_c=95.0, time_over_limit_s=4.0), row)
+    assert broken["original_violates"] and broken["improved_holds"] and broken["wasted_margin_c"] is None
+    assert "breaks the limit (true winding 95.0 °C, 11.0 K over, for 4.0 s" in broken["statement"]
+    careful = claim(84.0, dict(row, margin_c=20.0, closed_loop_hold_s=4.0), row)
+    assert not careful["original_violates"] and careful["wasted_margin_c"] == 18.0 and careful["hold_gain_s"] == 6.0
+    assert "conservative" in careful["statement"]
+    failed = claim(84.0, row, dict(row, margin_c=-0.5))
+    assert not failed["improved_holds"] and "FAILED" in failed["statement"]
+
+
+def _measurements(rng, n, casing):
+    return [Measurement(0.1 * k, np.array([-0.05]), np.zeros(1), np.array([rng.uniform(0, 3)]),
+                        None if k % 3 == 2 else np.array([casing + 0.05 * k])) for k in range(n)]
+
+
+def test_sensor_node_filter_is_the_project_ekf_on_a_casing_model():
+    model = load_model((ELBOW,), payload_kg=40.0)
+    settings = MPCSettings()
+    ours, ref = SensorNodeFilter(model, settings), ExtendedKalmanFilter(model, settings)
+    ms = _measurements(np.random.default_rng(1), 30, 43.0)
+    for f in (ours, ref):
+        f.initialise(ms[0])
+    for m in ms[1:]:
+        for f in (ours, ref):
+            f.predict(m.current_a)
+            f.update(m)
+    assert np.array_equal(ours.z, ref.z) and np.array_equal(ours.P, ref.P)
+
+
+def test_sensor_node_filter_measures_the_winding_of_a_one_node_model(chain):
+    out, _ = chain
+    model = load_model((ELBOW,), payload_kg=40.0, parameter_files={ELBOW: out / "models" / f"{ELBOW}_original.toml"})
+    assert model.networks[ELBOW].nodes == ("winding",)
+    f = SensorNodeFilter(model, MPCSettings())
+    f.initialise(Measurement(0.0, np.array([-0.05]), np.zeros(1), np.zeros(1), np.array([43.0])))
+    assert f.winding_c[0] == pytest.approx(43.0) and f.resistance_scale == 1.0
+    for k in range(200):   # a hot sensor reading held: the estimate follows the measured node
+        f.predict(np.zeros(1))
+        f.update(Measurement(0.1 * k, np.array([-0.05]), np.zeros(1), np.zeros(1), np.array([60.0])))
+    assert abs(f.winding_c[0] - 60.0) < 0.5
+
+
+def test_chain_writes_recordings_models_figures_and_table(chain):
+    out, table = chain
+    for name in ("static_3a", "static_4a", "biceps"):
+        with (out / "recordings" / f"{name}.csv").open() as handle:
+            header = next(csv.reader(handle))
+        assert header[0] == "time_s" and "temperature_c" in header and "winding_c" not in header
+    original = load_parameters(out / "models" / f"{ELBOW}_original.toml")
+    improved = load_parameters(out / "models" / f"{ELBOW}_improved.toml")
+    assert original.thermal.model == "one_node" and original.thermal["friction_heating_fraction"] == 0.0
+    assert improved.thermal.model == "two_node_drive" and improved.thermal["friction_heating_fraction"] > 0.5
+    assert json.loads((out / "loop.json").read_text()) == json.loads(json.dumps(table))
+    for fig in ("loop.png", "loop_summary.png", "diagnosis.png"):
+        assert (out / fig).stat().st_size > 10_000
+    assert {r["model"] for r in table["rows"]} == {"original", "improved", "truth"}
+
+
+def test_diagnosis_finds_the_robots_concealed_physics(chain):
+    _, table = chain
+    robot = robot_parameters()
+    assert robot.friction_heating and robot.drive_heating
+    assert {"friction_heating", "drive_heating"} <= set(table["diagnosis"]["missing_physics"])
+    assert table["diagnosis"]["rmse_after"] < 0.5 * table["diagnosis"]["rmse_before"]
+
+
+def test_improved_model_plans_and_its_closed_loop_keeps_the_true_winding_under_the_limit(chain):
+    _, table = chain
+    row = next(r for r in table["rows"] if r["model"] == "improved")
+    assert row["thermal_model"] == "two_node_drive"
+    assert row["plan_peak_winding_c"] <= LIMIT_C + 1e-3 and 0 < row["planned_hold_s"] <= 20.0
+    assert row["closed_loop_status"] == "completed" and row["cutoff_trips"] == 0
+    assert 0 <= row["margin_c"] and row["peak_true_winding_c"] <= LIMIT_C and row["time_over_limit_s"] == 0
+    assert row["closed_loop_hold_s"] > 0
+
+
+def test_original_model_breaks_the_limit_or_wastes_margin(chain):
+    """The claim, checked against the true winding: the one-node model (sensor = winding, constant ambient)
+    either exceeds the limit or holds less with more margin than the improved model."""
+    _, table = chain
+    orig, impr = (next(r for r in table["rows"] if r["model"] == m) for m in ("original", "improved"))
+    claim = table["claims"][0]
+    assert claim["original_violates"] == (orig["margin_c"] < 0)
+    if claim["original_violates"]:
+        assert orig["peak_true_winding_c"] > LIMIT_C and orig["time_over_limit_s"] > 0
+        # the original planner believed it was safe: its winding estimate never approached the limit
+        assert orig["peak_estimated_winding_c"] < LIMIT_C - 10
+    else:
+        assert orig["margin_c"] > impr["margin_c"] and orig["closed_loop_hold_s"] < impr["closed_loop_hold_s"]
+    assert claim["improved_holds"]
+
+
+def test_with_the_true_parameters_the_same_controller_keeps_a_small_margin(chain):
+    """The oracle row (the robot's own parameter file as the planner's model): the closed loop then ends
+    near the 1 K back-off, so the improved model's larger margin is the identification's, not the
+    controller's."""
+    _, table = chain
+    impr, truth = (next(r for r in table["rows"] if r["model"] == m) for m in ("improved", "truth"))
+    assert truth["closed_loop_status"] == "completed" and 0 <= truth["margin_c"] < 3.0
+    assert truth["closed_loop_hold_s"] >= impr["closed_loop_hold_s"] and truth["margin_c"] <= impr["margin_c"]
+    claim_ = table["claims"][0]
+    assert claim_["oracle_hold_s"] == truth["closed_loop_hold_s"]
+    assert claim_["improved_hold_share_of_oracle"] == pytest.approx(impr["closed_loop_hold_s"] / truth["closed_loop_hold_s"])

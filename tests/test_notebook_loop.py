@@ -1,0 +1,40 @@
+"""notebooks/close_the_loop.ipynb runs end to end (short experiments) and its table backs its claims."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import nbformat
+from nbclient import NotebookClient
+
+from thermo_ddp.parameters import load_parameters
+
+NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "close_the_loop.ipynb"
+
+
+def test_close_the_loop_notebook_runs_and_the_improved_model_holds_both_limits(tmp_path, monkeypatch):
+    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_SHORT", "1")
+    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_OUT", str(tmp_path))
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    nb = nbformat.read(NOTEBOOK, as_version=4)
+    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
+    text = "".join(o.get("text", "") for cell in nb.cells for o in cell.get("outputs", []))
+    assert "close the loop: ok" in text and "truth (hidden)" in text
+    table = json.loads((tmp_path / "close_the_loop.json").read_text())
+    assert table["settings"]["hold_s"] == 45.0 and table["settings"]["limits_c"] == [84.0, 140.0]
+    assert {"friction_heating", "drive_heating"} <= set(table["diagnosis"]["missing_physics"])
+    improved = load_parameters(table["model_files"]["improved"])
+    assert improved.thermal.model == "two_node_drive"
+    rows = {(r["model"], r["limit_c"]): r for r in table["rows"]}
+    for lim in (84.0, 140.0):
+        orig, impr = rows["original", lim], rows["improved", lim]
+        # the improved plan respects the limit in its own model, and the robot's TRUE winding stays under it
+        assert impr["plan_peak_winding_c"] <= lim + 1e-3 and impr["planned_hold_s"] > 0
+        assert impr["peak_true_winding_c"] <= lim and impr["cutoff_trips"] == 0 and impr["closed_loop_hold_s"] > 0
+        # the original model breaks the limit, or else is more conservative (more margin, shorter hold)
+        assert orig["margin_c"] < 0 or (orig["margin_c"] > impr["margin_c"]
+                                        and orig["closed_loop_hold_s"] < impr["closed_loop_hold_s"])
+    # 140 °C buys hold time with the improved model
+    assert rows["improved", 140.0]["closed_loop_hold_s"] > rows["improved", 84.0]["closed_loop_hold_s"]
+    for fig in ("loop.png", "loop_summary.png", "diagnosis.png"):
+        assert (tmp_path / fig).stat().st_size > 10_000
