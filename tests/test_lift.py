@@ -95,3 +95,18 @@ def test_cli_plan_bad_model_file_exits_2(tmp_path, capsys):
     assert main(["plan", "--model", str(bad), "--hold-s", "2"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and str(bad) in err
+
+
+def test_one_node_parameter_file_plans_and_writes_json(tmp_path, elbow_file):
+    """The report's one-node model (sensor = winding) plans too; casing_c is then the sensor node."""
+    from thermo_ddp.parameters import load_parameters, parameters_from_dict, save_parameters
+
+    data = load_parameters(elbow_file).to_dict()
+    data["thermal"] = {"model": "one_node", "ambient_c": 26.0, "capacity_j_per_k": 300.0, "resistance_k_per_w": 1.8}
+    path = tmp_path / "one_node.toml"
+    save_parameters(parameters_from_dict(data), path)
+    out = tmp_path / "plan.json"
+    assert main(["plan", "--model", str(path), "--hold-s", "3", "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["casing_c"] == d["winding_c"] and "drive_c" not in d
+    assert d["model"]["motors"]["arm_left_4_joint"]["thermal"]["model"] == "one_node"

@@ -36,6 +36,17 @@ def _compare(args) -> int:
     return 0
 
 
+def _loop(args) -> int:
+    from .loop import loop_files
+    options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle}
+    if args.hold_s is not None:
+        options["hold_s"] = args.hold_s
+    loop_files(args.out, short=args.short, **options)
+    print((Path(args.out) / "loop.txt").read_text(), end="")
+    print(f"outputs in {args.out}: loop.json, loop.png, loop_summary.png, diagnosis.json, models/, recordings/")
+    return 0
+
+
 def _write_json(data: dict, path: str | None) -> None:
     text = json.dumps(data, indent=2)
     if path is None:
@@ -105,7 +116,19 @@ def _plan_parser(name: str, description: str) -> _Parser:
     return cmd
 
 
+def _loop_parser() -> _Parser:
+    cmd = _Parser(prog="thermo-ddp loop", description="recordings -> identification -> diagnosis -> improved "
+                  "model -> plan -> closed loop, original vs improved model, on the simulated elbow")
+    cmd.add_argument("--out", default="loop_out", help="output folder (default loop_out)")
+    cmd.add_argument("--short", action="store_true", help="30-minute experiments and a 45 s hold")
+    cmd.add_argument("--hold-s", type=float, default=None)
+    cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0])
+    cmd.add_argument("--no-oracle", action="store_true", help="skip the run planned with the true parameters")
+    return cmd
+
+
 COMMANDS = {
+    "loop": (_loop_parser, _loop),
     "plan": (lambda: _plan_parser("plan", "plan the elbow lift under a winding-temperature limit"), _plan),
     "compare": (lambda: _plan_parser("compare", "the lift under several winding limits, as a table"), _compare),
     "demo": (_demo_parser, _demo),

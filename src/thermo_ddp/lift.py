@@ -309,6 +309,11 @@ class LiftPlan:
         """(N+1, joints) of a state quantity (q_rad, v_rad_s, winding_c, casing_c, drive_c)."""
         return self.xs[:, [self.model.index(j, quantity) for j in self.model.joints]]
 
+    def sensor_c(self) -> np.ndarray:
+        """(N+1, joints) of the measured node: the casing, or the winding itself in a one-node model."""
+        nets = self.model.networks
+        return self.xs[:, [self.model.index(j, f"{nets[j].sensor_node}_c") for j in self.model.joints]]
+
     def currents(self) -> np.ndarray:
         """(N+1, joints): u_k holds on [t_k, t_k+1); the last value is repeated at t_N."""
         return np.vstack([self.us, self.us[-1:]])
@@ -326,7 +331,7 @@ class LiftPlan:
              "time_s": self.time_s.tolist(), "q_rad": self.series("q_rad").tolist(),
              "v_rad_s": self.series("v_rad_s").tolist(), "current_a": self.currents().tolist(),
              "voltage_v": self.voltage_v().tolist(), "winding_c": self.series("winding_c").tolist(),
-             "casing_c": self.series("casing_c").tolist()}
+             "casing_c": self.sensor_c().tolist()}
         if "drive" in self.model.networks[self.model.joints[0]].nodes:
             d["drive_c"] = self.series("drive_c").tolist()
         d["model"] = self.model.to_dict(s.integrator, s.dt_s)
@@ -336,7 +341,7 @@ class LiftPlan:
         return d
 
     def report(self) -> str:
-        w, c = self.series("winding_c").max(), self.series("casing_c").max()
+        w, c = self.series("winding_c").max(), self.sensor_c().max()
         ttl = "never" if math.isinf(self.time_to_limit_s) else f"{self.time_to_limit_s:.1f} s"
         return "\n".join([
             f"lift {self.settings.payload_kg:g} kg, winding limit {self.settings.limit_c:g} °C: "
@@ -402,7 +407,7 @@ class LimitComparison:
     def rows(self) -> list[dict]:
         return [{"limit_c": p.settings.limit_c, "feasible": p.feasible, "hold_s": p.achieved_hold_s,
                  "peak_winding_c": float(p.series("winding_c").max()),
-                 "peak_casing_c": float(p.series("casing_c").max()),
+                 "peak_casing_c": float(p.sensor_c().max()),
                  "joule_energy_j": joule_energy_j(p), "binding": ", ".join(p.binding_constraints),
                  "solve_s": p.solver["total_solve_s"]} for p in self.plans]
 

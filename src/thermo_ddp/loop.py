@@ -610,8 +610,8 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
 def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[str, Any]:
     """CLI entry (``thermo-ddp loop``): run the chain, write into ``out_dir`` the recordings
     (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth),
-    the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png) and the table (loop.json);
-    return the table."""
+    the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png), the table (loop.json)
+    and the report (loop.txt); return the table."""
     out_dir = Path(out_dir)
     settings = LoopSettings.short(**options) if short else settings_from_mapping(LoopSettings, options, _SRC)
     result = run_loop(settings, out_dir)
@@ -621,6 +621,7 @@ def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[s
     result.plot_summary(out_dir / "loop_summary.png")
     table = result.to_dict()
     (out_dir / "loop.json").write_text(json.dumps(table, indent=1))
+    (out_dir / "loop.txt").write_text(result.report() + "\n")
     return table
 
 

@@ -26,7 +26,7 @@ def plot_lift(plan, path) -> None:
     ax[2].axhline(-params.motor.bus_voltage_v, ls=":", c="r")
     ax[2].set_ylabel("voltage [V]")
     ax[3].plot(t, plan.series("winding_c"), c="tab:red", label="winding")
-    ax[3].plot(t, plan.series("casing_c"), c="tab:orange", label="casing (sensor)")
+    ax[3].plot(t, plan.sensor_c(), c="tab:orange", label="casing (sensor)")
     ax[3].axhline(plan.settings.limit_c, ls="--", c="k", label=f"winding limit {plan.settings.limit_c:g} °C")
     ax[3].axhline(params.limits.safety_cutoff_c, ls=":", c="grey", label=f"cut-off {params.limits.safety_cutoff_c:g} °C (casing sensor)")
     ax[3].set_ylabel("temperature [°C]")
