@@ -1,38 +1,30 @@
-"""Benchmark the DDP backends (codegen C, CasADi VM, numpy) against IPOPT and crocoddyl.
+"""Benchmark the DDP backends (codegen C, CasADi VM, numpy) against IPOPT.
 
-Cases (medians over repeated runs, written as JSON):
-1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (tests/test_ddp_vs_ipopt.py,
-   n_thermal=3), N=200, winding limit and voltage limit active; closed loop over
+Cases (medians over repeated runs, written to benchmarks/results/ddp_backends.json):
+1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (_toy.py, a copy of the toy in
+   tests/test_ddp_vs_ipopt.py; n_thermal=3), N=200, winding limit and voltage limit active; closed loop over
    ``--mpc-steps`` steps, each warm-started from the shifted previous solution; IPOPT is
    warm-started the same way (primal + dual). Ratio ipopt / ddp per step.
    mpc_severe: the same with a limit so tight that the lift stops short.
 2. scaling: one backward + forward pass of the same problem for N = 100..800 (codegen).
 3. arm: unconstrained 7-DOF Talos left arm (example-robot-data URDF talos_left_arm.urdf,
    CasADi ABA from thermo_ddp.rigid_body), nx=14, nu=7, N=100, RK4: time per iteration (one backward and
-   one forward pass) per backend; crocoddyl FDDP on the same arm when a Python with
-   crocoddyl is given by $CROCODDYL_PYTHON (it cannot share this venv: it pins
-   example-robot-data 5); both load the same URDF file.
+   one forward pass) per backend. (crocoddyl on the same arm: bench_arm_crocoddyl.py.)
 
-Usage: python benchmarks/bench_ddp_backends.py [--json out.json] [--quick]
+Usage: python benchmarks/bench_ddp_backends.py [--quick]
 """
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_ddp_vs_ipopt import T_AMB, thermal_pendulum  # noqa: E402
-
-from thermo_ddp.ocp import Cost, OptimalControlProblem  # noqa: E402
-from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, WarmStart  # noqa: E402
+from _common import write
+from _toy import T_AMB, thermal_pendulum
+from thermo_ddp.ocp import Cost, OptimalControlProblem
+from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, WarmStart
 
 X0 = np.array([0.0, 0.0, T_AMB + 5.0, T_AMB + 5.0, T_AMB + 5.0])
 LIMIT_C = 32.5  # winding limit active during the hold, goal still reached
@@ -160,45 +152,11 @@ def bench_arm(repeats, quick):
         t_f = median_time(lambda: be.forward(X, U, P, policy, C, 1.0), reps)
         out[backend] = {"build_s": solver.build_s, "backward_s": t_b, "forward_s": t_f, "iteration_s": t_b + t_f,
                         "solve_s": res.solve_s, "iterations": res.iterations, "status": res.status, "cost": res.cost}
-    croc = os.environ.get("CROCODDYL_PYTHON")
-    if croc:
-        out["crocoddyl"] = json.loads(subprocess.run([croc, "-c", CROCODDYL_SCRIPT, arm_urdf()], check=True,
-                                                     capture_output=True, text=True).stdout)
-        out["codegen_over_crocoddyl_iteration"] = out["codegen"]["iteration_s"] / out["crocoddyl"]["iteration_s"]
     return out
-
-
-CROCODDYL_SCRIPT = r"""
-import json, sys, time, numpy as np, crocoddyl, pinocchio as pin
-model = pin.buildModelFromUrdf(sys.argv[1])
-nq = model.nq
-state = crocoddyl.StateMultibody(model)
-act = crocoddyl.ActuationModelFull(state)
-target = np.concatenate([np.full(nq, 0.3), np.zeros(nq)])
-def running(w_u, w_x):
-    costs = crocoddyl.CostModelSum(state, nq)
-    costs.addCost("state", crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelState(state, target, nq)), w_x)
-    if w_u:
-        costs.addCost("control", crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state, nq)), w_u)
-    dam = crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, costs)
-    return crocoddyl.IntegratedActionModelRK(dam, crocoddyl.RKType.four, 0.01)
-problem = crocoddyl.ShootingProblem(np.zeros(2 * nq), [running(1e-3, 1.0)] * 100, running(0.0, 100.0))
-times, iters = [], []
-for _ in range(5):
-    solver = crocoddyl.SolverFDDP(problem)
-    start = time.perf_counter()
-    solver.solve([], [], 50)
-    times.append(time.perf_counter() - start)
-    iters.append(solver.iter)
-t = float(np.median(times))
-print(json.dumps({"solve_s": t, "iterations": int(iters[0]), "iteration_s": t / max(iters[0], 1),
-                  "cost": solver.cost, "version": crocoddyl.__version__}))
-"""
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--json", default="out/bench_ddp_backends.json")
     ap.add_argument("--mpc-steps", type=int, default=30)
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--quick", action="store_true", help="skip the slow numpy backend")
@@ -208,10 +166,7 @@ def main():
     result["cases"]["mpc_severe"] = bench_mpc(args.mpc_steps, True, SEVERE_C)
     result["cases"]["scaling"] = bench_scaling(args.repeats)
     result["cases"]["arm"] = bench_arm(args.repeats, args.quick)
-    path = Path(args.json)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2))
-    print(json.dumps(result, indent=2))
+    write("ddp_backends", result)
 
 
 if __name__ == "__main__":

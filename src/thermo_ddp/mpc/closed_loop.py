@@ -1,6 +1,7 @@
 """``run_closed_loop()``: plant, observer and receding-horizon controller together, and its result."""
 from __future__ import annotations
 
+import collections
 import dataclasses
 import logging
 import time
@@ -32,6 +33,10 @@ class ClosedLoopResult:
     ``iterations``, ``step_status``, ``hold_s``. ``peak_winding_c`` includes the plant's sub-steps.
     ``planner_x0`` (K, nx) and ``planner_params`` (K, N+1, np): what every solve was given;
     ``measurements`` (K+1): what the observer was given (to re-run a filter offline).
+    ``events`` (K): per period, what happened beyond the normal (sensor samples missing, NaN, repeated,
+    the casing sensor stuck or inconsistent and then distrusted, solves failed or late, fallbacks,
+    derates, hold shortened, the room changed, a payload mismatch, the cut-off); ``tightening_c`` (K):
+    the kelvin added to the planning state's thermal nodes (uncertainty and sensor-fault back-off).
     """
 
     success: bool
@@ -62,6 +67,8 @@ class ClosedLoopResult:
     planner_x0: np.ndarray
     planner_params: np.ndarray
     measurements: tuple[Measurement, ...]
+    events: tuple[tuple[str, ...], ...] = ()
+    tightening_c: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return (f"ClosedLoopResult({self.status}, peak winding {self.peak_winding_c:.2f} °C, "
@@ -84,6 +91,15 @@ class ClosedLoopResult:
         """First-solve times of the warm periods (k >= 1)."""
         return self.first_solve_s[1:]
 
+    def event_counts(self) -> dict[str, dict[str, float]]:
+        """Per event name: the number of periods it occurred in and the time of the first."""
+        out: dict[str, dict[str, float]] = {}
+        for k, names in enumerate(self.events):
+            for name in dict.fromkeys(names):
+                entry = out.setdefault(name, {"count": 0, "first_s": float(self.time_s[k + 1])})
+                entry["count"] += 1
+        return dict(sorted(out.items(), key=lambda item: item[1]["first_s"]))
+
     def summary(self) -> dict[str, Any]:
         warm = self.warm_solve_s()
         counts = {s: self.step_status.count(s) for s in sorted(set(self.step_status))}
@@ -99,7 +115,9 @@ class ClosedLoopResult:
                 "warm_solve_max_s": float(warm.max()) if warm.size else None,
                 "period_solve_max_s": float(self.solve_s.max()),
                 "median_iterations": float(np.median(self.iterations[1:])) if warm.size else None,
-                "step_status": counts}
+                "step_status": counts, "events": self.event_counts(),
+                "max_tightening_c": float(np.max(self.tightening_c)) if self.tightening_c is not None and
+                self.tightening_c.size else 0.0}
 
     def to_dict(self) -> dict[str, Any]:
         d = self.summary()
@@ -111,6 +129,7 @@ class ClosedLoopResult:
         if self.drive_c is not None:
             d["drive_c"] = self.drive_c.tolist()
         d["step_status_series"] = list(self.step_status)
+        d["events_series"] = [list(e) for e in self.events]
         return d
 
     def report(self) -> str:
@@ -130,7 +149,10 @@ class ClosedLoopResult:
             f"{'TRIPPED' if self.cutoff_tripped else 'not tripped'}",
             f"  hold requested {self.settings.hold_s:.1f} s, planned {s['planned_hold_s']:.1f} s",
             f"  warm re-solves: {warm}; median {s['median_iterations']} iterations; "
-            f"periods: {', '.join(f'{k} {v}' for k, v in s['step_status'].items())}"])
+            f"periods: {', '.join(f'{k} {v}' for k, v in s['step_status'].items())}",
+            "  events: " + (", ".join(f"{name} x{e['count']} (first at {e['first_s']:.1f} s)"
+                                      for name, e in s["events"].items()) or "none")
+            + (f"; planning state raised by up to {s['max_tightening_c']:.2f} K" if s["max_tightening_c"] else "")])
 
     def plot(self, path) -> None:
         from .plots import plot_closed_loop
@@ -141,7 +163,7 @@ class ClosedLoopResult:
 class _Log:
     rows: dict[str, list] = dataclasses.field(default_factory=lambda: {k: [] for k in (
         "x", "est", "std", "scale", "casing", "received", "current", "voltage", "steps", "x0", "params",
-        "measurements")})
+        "measurements", "events", "tightening")})
 
     def instant(self, plant: Plant, observer: ExtendedKalmanFilter, m: Measurement, casing, received: bool):
         r = self.rows
@@ -163,10 +185,68 @@ class _Log:
 
 
 def build_models(settings: MPCSettings) -> tuple[ActuatedArm, ActuatedArm]:
-    """The planner's model and the plant's (thermal resistances and capacities scaled)."""
+    """The planner's model and the plant's (thermal values, friction and payload scaled)."""
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
-    return model, perturbed_model(model, settings.plant_resistance_scale, settings.plant_capacity_scale)
+    return model, perturbed_model(model, settings.plant_resistance_scale, settings.plant_capacity_scale,
+                                  dict(settings.plant_thermal_scales), settings.plant_friction_scale,
+                                  settings.plant_payload_scale)
+
+
+class _Supervisor:
+    """Between observer and controller: the room the planner assumes, the tightening of the planning state
+    (uncertainty and sensor-fault back-off) and the payload check while holding."""
+
+    def __init__(self, settings: MPCSettings, model: ActuatedArm, controller: RecedingHorizonController,
+                 ekf: ExtendedKalmanFilter):
+        self.settings, self.model, self.controller, self.ekf = settings, model, controller, ekf
+        self.room_c: float | None = None
+        self.assumed_c = model.ambient_c
+        self._room: collections.deque = collections.deque(maxlen=max(1, round(1.0 / settings.control_period_s)))
+        self._ratios: list[float] = []
+        self.payload_reported = False
+
+    def room(self, m: Measurement) -> list[str]:
+        """When the room thermometer's 1-s median leaves the assumed room by ambient_change_c, the planner and the
+        observer take the median of the last three readings."""
+        if m.ambient_c is None or not np.isfinite(m.ambient_c):
+            return []
+        self._room.append(m.ambient_c)
+        if abs(float(np.median(self._room)) - self.assumed_c) <= self.settings.ambient_change_c:
+            return []
+        self.room_c = float(np.median(list(self._room)[-3:]))   # the new level: the latest samples
+        log.warning("t = %.1f s: room %.1f °C, planner assumed %.1f °C: following it", m.time_s, self.room_c,
+                    self.assumed_c)
+        self.assumed_c = self.controller.ambient_c = self.ekf.ambient_c = float(self.room_c)
+        return ["ambient_change"]
+
+    def tighten(self) -> float:
+        s, ekf = self.settings, self.ekf
+        t = s.uncertainty_sigmas * float(np.max(ekf.winding_std_c))
+        if not ekf.monitor.trusted:
+            t += s.sensor_fault_backoff_c
+        self.controller.tightening_c = t
+        return t
+
+    def payload(self, m: Measurement, k: int) -> list[str]:
+        """While holding still: the measured current against the model's static current (1 s averages)."""
+        c = self.controller
+        task = c.task.with_hold(c.hold_s).params
+        if self.payload_reported or k >= task.shape[0] or task[k, 2] < 0.5 or np.max(np.abs(m.v_rad_s)) > 0.05:
+            self._ratios.clear()
+            return []
+        static = self.model.static_current_a(m.q_rad)
+        self._ratios.append(float(np.mean(m.current_a / static)))
+        if len(self._ratios) < round(1.0 / self.settings.control_period_s):
+            return []
+        ratio = float(np.mean(self._ratios))
+        self._ratios.clear()
+        if abs(ratio - 1) <= self.settings.payload_mismatch_tolerance:
+            return []
+        self.payload_reported = True
+        log.warning("t = %.1f s: holding takes %.0f %% of the model's current: the payload differs from the "
+                    "planned %.1f kg", m.time_s, 100 * ratio, self.settings.payload_kg)
+        return ["payload_mismatch"]
 
 
 def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observer: ObserverSettings | None = None,
@@ -182,13 +262,17 @@ def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observe
     lp = planning_problem(settings, model)
     controller = RecedingHorizonController(lp, settings, solver)
     rng = np.random.default_rng(settings.seed)
-    plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad]), settings, rng)
+    temps = None if settings.plant_initial_c is None else np.full(plant_model.nx - 2 * plant_model.nu,
+                                                                   settings.plant_initial_c)
+    plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad], temperatures_c=temps), settings, rng)
     ekf = ExtendedKalmanFilter(model, settings, observer or ObserverSettings())
+    supervisor = _Supervisor(settings, model, controller, ekf)
     steps = controller.task_knots + int(round(settings.extra_s / settings.control_period_s))
     m = plant.measure()
-    while m.casing_c is None:     # a delayed or dropped sensor: wait at rest for the first sample
+    while m.casing_c is None or not np.all(np.isfinite(m.casing_c)):  # wait at rest for the first sample
         plant.apply(np.zeros(model.nu))
         m = plant.measure()
+    supervisor.room(m)
     ekf.initialise(m)
     log_ = _Log()
     last_casing = m.casing_c.copy()
@@ -196,19 +280,23 @@ def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observe
     tripped = False
     started = time.perf_counter()
     for k in tqdm(range(steps), desc="closed loop", unit="period", disable=not progress, leave=False):
-        x0 = ekf.state
-        step = controller.start(x0) if k == 0 else controller.step(x0)
+        tightening = supervisor.tighten()
+        x0 = controller.planning_state(ekf.state)
+        step = controller.start(ekf.state) if k == 0 else controller.step(ekf.state)
         plant.apply(step.current_a)
         log_.period(plant, step, x0, controller.window(k))  # the window of the accepted plan
         m = plant.measure()
-        ekf.predict(m.current_a)
-        ekf.update(m)
-        received = m.casing_c is not None
+        events = list(step.events) + ekf.filter_step(m) + supervisor.room(m) + supervisor.payload(m, k + 1)
+        received = m.casing_c is not None and bool(np.all(np.isfinite(m.casing_c)))
         last_casing = m.casing_c.copy() if received else last_casing
         log_.instant(plant, ekf, m, last_casing, received)
         if received and np.any(m.casing_c >= plant.safety_cutoff_c):
             tripped = True
+            events.append("cutoff_tripped")
             log.warning("t = %.1f s: measured casing %.1f °C: safety cut-off", plant.time_s, m.casing_c.max())
+        log_.rows["events"].append(tuple(events))
+        log_.rows["tightening"].append(tightening)
+        if tripped:
             break
     log.info("closed loop: %d periods in %.2f s", len(log_.rows["steps"]), time.perf_counter() - started)
     return _result(settings, plant, log_, tripped)
@@ -236,6 +324,9 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
         message = f"the true winding stayed {settings.limit_c - peak:.2f} K under the limit"
     if fallbacks:
         message += f"; {fallbacks} periods used the fallback control"
+    faults = sorted({e for names in r["events"] for e in names} - {"casing_repeat", "casing_missing"})
+    if faults:
+        message += f"; events: {', '.join(faults)}"
     return ClosedLoopResult(
         success, status, message, settings, np.arange(xs.shape[0]) * settings.control_period_s,
         node("winding"), node("casing"), drive, xs[:, 0], xs[:, model.nu],
@@ -244,4 +335,4 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
         np.array([s.solve_s for s in steps]), np.array([s.first_solve_s for s in steps]),
         np.array([s.iterations for s in steps]), tuple(s.status for s in steps), np.array([s.hold_s for s in steps]),
         float(peak), plant.safety_cutoff_c, tripped, np.array(r["x0"]), np.array(r["params"]),
-        tuple(r["measurements"]))
+        tuple(r["measurements"]), tuple(r["events"]), np.array(r["tightening"], dtype=float))

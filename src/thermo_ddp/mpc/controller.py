@@ -6,6 +6,14 @@ hold flag, ambient) are shifted in time and the last row (at rest at the start) 
 task's end. When a re-solve is infeasible, the remaining hold is shortened (the winding limit has
 priority over holding) and the problem re-solved; if still infeasible, the controller falls back
 to the previous plan's shifted control with its feedback gains, u = u_j + K_j (x - x_j).
+
+Faults: a solve that fails, or takes longer than ``settings.max_solve_s`` (its answer would come
+too late; it is discarded), also leads to that fallback, and the period says so in its events. With
+``settings.derate`` the fallback current is capped at the no-heating current (the current whose
+Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
+planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
+the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
+time constant of tens of minutes this tightens the limit by about as much over the whole window.
 """
 from __future__ import annotations
 
@@ -39,6 +47,7 @@ class ControlStep:
     solves: int
     hold_s: float              # the planned hold after this period
     cost: float                # of the last solve
+    events: tuple[str, ...] = ()   # solve_failed, solve_timeout, fallback_plan, derate, hold_shortened, ...
 
 
 def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
@@ -94,6 +103,11 @@ class RecedingHorizonController:
         self.k = 0
         self.plan: SolverResult | None = None
         self.plan_age = 0
+        self.ambient_c: float | None = None   # the room the planner assumes (None: the model's)
+        self.tightening_c = 0.0                # K added to every thermal node of the planning state
+        self._thermal = np.arange(2 * lp.model.nu, lp.model.nx)
+        self._winding = lp.model.node_indices("winding")
+        self._ode = lp.model.ode
 
     @property
     def hold_s(self) -> float:
@@ -107,24 +121,37 @@ class RecedingHorizonController:
         rows = task[k:k + n]
         window = np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)])
         window[0, 2] = 0.0  # no hold band on the measured present state: no control can change it
+        if self.ambient_c is not None:
+            window[:, 3] = self.ambient_c
         return window
 
-    def _acceptable(self, result: SolverResult) -> bool:
-        return bool(np.isfinite(result.cost) and result.max_constraint_violation <= self.settings.feasibility_tolerance)
+    def planning_state(self, x_est: np.ndarray) -> np.ndarray:
+        """The state the planner starts from: the estimate with every thermal node raised by ``tightening_c``."""
+        x = np.array(x_est, dtype=float)
+        x[self._thermal] += self.tightening_c
+        return x
+
+    def _acceptable(self, result: SolverResult, deadline: bool = True) -> bool:
+        """Finite, feasible and (re-solves only: the cold plan is made before moving) in time."""
+        return bool(np.isfinite(result.cost) and result.max_constraint_violation <= self.settings.feasibility_tolerance
+                    and not (deadline and self._late(result.solve_s)))
+
+    def _late(self, solve_s: float) -> bool:
+        return self.settings.max_solve_s is not None and solve_s > self.settings.max_solve_s
 
     def start(self, x_est: np.ndarray) -> ControlStep:
         """Cold plan at knot 0. When the requested hold is infeasible from the estimated state, it is cut
         to what the window holds and the longest feasible hold is searched (complete optimisations, as
         plan_lift does)."""
-        lp = dataclasses.replace(self.lp, x0=np.asarray(x_est, float), params=self.window(0))
+        lp = dataclasses.replace(self.lp, x0=self.planning_state(x_est), params=self.window(0))
         result = self.solver.solve(lp.x0, lp.params, initial_guess(lp))
         total, first_s, iterations, solves, status = result.solve_s, result.solve_s, result.iterations, 1, "cold"
         room = self.lp.hold_knots[1] - self.lp.hold_knots[0]
-        if not self._acceptable(result) and self.hold_knots > room:
+        if not self._acceptable(result, False) and self.hold_knots > room:
             self.hold_knots, self.task, status = room, self.lp, "hold_shortened"
             result = self.solver.solve(lp.x0, self.window(0), initial_guess(lp.with_hold(self.hold_s)))
             total, iterations, solves = total + result.solve_s, iterations + result.iterations, solves + 1
-        if not self._acceptable(result) and self.hold_knots > 0:
+        if not self._acceptable(result, False) and self.hold_knots > 0:
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
             best_lp, best, probes, probe_s = longest_feasible_hold(lp.with_hold(self.hold_s), self.solver, estimate)
             solves, total = solves + probes, total + probe_s
@@ -133,39 +160,51 @@ class RecedingHorizonController:
                          self.hold_s, best_lp.hold_s)
                 self.hold_knots, result, status = best_lp.hold_knots[1] - best_lp.hold_knots[0], best, "hold_shortened"
                 iterations += best.iterations
-        if not self._acceptable(result):
+        events = ("hold_shortened",) if status == "hold_shortened" else ()
+        if not self._acceptable(result, False):
             log.warning("no feasible initial plan (%s); applying the best iterate", result.status)
-            status = "fallback"
+            status, events = "fallback", events + ("no_feasible_plan",)
         self.plan, self.plan_age, self.k = result, 0, 0
         return ControlStep(self._clip(result.us[0]), status, result.status, total, first_s, iterations, solves,
-                           self.hold_s, result.cost)
+                           self.hold_s, result.cost, events)
 
     def step(self, x_est: np.ndarray) -> ControlStep:
-        """Advance one knot and re-solve from ``x_est``, warm-started from the shifted plan."""
+        """Advance one knot and re-solve from ``x_est`` (raised by ``tightening_c``), warm-started from the
+        shifted plan; a failed or late solve falls back to the previous plan with feedback (derated)."""
         if self.plan is None:
             raise RuntimeError("call start() before step()")
+        x_est = self.planning_state(x_est)
         self.k += 1
         age = self.plan_age + 1
         warm = self.warm_start(age)
         result = self.solver.solve(x_est, self.window(), warm)
         results, status = [result], "solved"
-        while not self._acceptable(result) and len(results) <= self.settings.max_retries and self._shorten():
+        while (not self._acceptable(result) and not self._late(sum(r.solve_s for r in results))
+               and len(results) <= self.settings.max_retries and self._shorten()):
             result = self.solver.solve(x_est, self.window(), warm)
             results.append(result)
             status = "hold_shortened"
-        if self._acceptable(result):
+        t = self.k * self.lp.settings.dt_s
+        events = ["hold_shortened"] if status == "hold_shortened" else []
+        if self._acceptable(result) and not self._late(sum(r.solve_s for r in results)):
             self.plan, self.plan_age = result, 0
             current = result.us[0]
             if status == "hold_shortened":
-                log.info("t = %.1f s: hold shortened to %.1f s", self.k * self.lp.settings.dt_s, self.hold_s)
+                log.info("t = %.1f s: hold shortened to %.1f s", t, self.hold_s)
         else:
             self.plan_age, status = age, "fallback"
-            current = self._fallback(x_est, age)
-            log.warning("t = %.1f s: re-solve failed (%s, violation %.2e); previous plan's control with feedback",
-                        self.k * self.lp.settings.dt_s, result.status, result.max_constraint_violation)
+            late = self._late(sum(r.solve_s for r in results))
+            events += ["solve_timeout" if late else "solve_failed", "fallback_plan"]
+            current, derated = self._fallback(x_est, age)
+            if derated:
+                events.append("derate")
+            log.warning("t = %.1f s: re-solve %s (%s, violation %.2e, %.1f ms); previous plan's control with "
+                        "feedback%s", t, "too late" if late else "failed", result.status,
+                        result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
+                        ", derated to the no-heating current" if derated else "")
         return ControlStep(self._clip(current), status, result.status, sum(r.solve_s for r in results),
                            results[0].solve_s, sum(r.iterations for r in results), len(results), self.hold_s,
-                           result.cost)
+                           result.cost, tuple(events))
 
     def warm_start(self, shift: int = 1) -> WarmStart:
         """The plan shifted by ``shift`` knots with its multipliers; the AL penalty is capped at
@@ -187,13 +226,34 @@ class RecedingHorizonController:
         self.hold_knots = new
         return True
 
-    def _fallback(self, x_est: np.ndarray, age: int) -> np.ndarray:
+    def _fallback(self, x_est: np.ndarray, age: int) -> tuple[np.ndarray, bool]:
+        """The previous plan's control ``age`` knots on with its feedback; derated (capped at the no-heating
+        current) once the winding of ``x_est`` is at the planning limit or the plan has run out."""
         plan = self.plan
         j = min(age, plan.us.shape[0] - 1)
         u = plan.us[j].copy()
         if plan.K is not None:
             u = u + plan.K[j] @ (np.asarray(x_est, float) - plan.xs[j])
-        return u
+        hot = np.max(np.asarray(x_est)[self._winding]) >= self.lp.settings.limit_c - 1e-6
+        if not (self.settings.derate and (hot or age >= plan.us.shape[0])):
+            return u, False
+        cap = self.no_heating_current_a(x_est)
+        capped = np.clip(u, -cap, cap)
+        return capped, bool(np.any(capped != u))
+
+    def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:
+        """Per joint, the |current| at which the winding's temperature stops rising at state ``x`` (model ODE:
+        dT_w/dt(i) = a + b i^2, from the rates at 0 and 1 A with the other joints' currents at 0)."""
+        amb = self.lp.model.ambient_c if self.ambient_c is None else self.ambient_c
+        n = self.lp.model.nu
+        rate0 = np.array(self._ode(x, np.zeros(n), amb)).ravel()[self._winding]
+        cap = np.zeros(n)
+        for k in range(n):
+            one = np.zeros(n)
+            one[k] = 1.0
+            b = np.array(self._ode(x, one, amb)).ravel()[self._winding[k]] - rate0[k]
+            cap[k] = np.sqrt(max(0.0, -rate0[k]) / b) if b > 0 else 0.0
+        return cap
 
     def _clip(self, current) -> np.ndarray:
         pr = self.lp.problem

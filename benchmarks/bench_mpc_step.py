@@ -1,0 +1,100 @@
+"""One warm MPC step of the elbow + thermal lift, N = 200 (dt = 0.1 s): DDP vs IPOPT (and fatrop).
+
+The solver-level step only (no controller loop logic from thermo_ddp.mpc): the lift of
+bench_lift_ocp (40 kg, 20 s scenario) under 140 °C (limit inactive) and 94 °C (limit active in
+every prediction: it binds near the end of the hold, inside the 200-knot horizon). Closed loop
+over ``--steps`` steps from the start: the plant is the model's own step with DDP's first current,
+then a velocity disturbance (1e-2 rad/s, seeded; on v only, so the measured angle is the one
+predicted at knot 1 and always inside the hold band: a disturbed angle just outside the band
+makes the knot-0 constraint unsatisfiable for every solver); at each step every solver solves the same
+problem (the measured state, the per-knot reference moved on by one knot, its last knot repeated),
+warm-started from its own previous solution shifted by one knot: DDP with trajectories, AL
+multipliers and penalty; IPOPT with primal and dual (warm_start_init_point), the stage blocks of
+its multipliers shifted the same way; fatrop with the primal only. Each step's solve is repeated
+``--repeats`` times (median); reported: median and worst step over the loop, iterations, and the
+ratio IPOPT / DDP.
+
+    python benchmarks/bench_mpc_step.py [--steps 30] [--repeats 3] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import statistics
+
+import numpy as np
+
+from _common import write
+from _ocp_bench import lift_problem, shifted_nlp_warm_start, timed_solves
+from thermo_ddp.lift import LiftSettings, binding_constraints, initial_guess, make_solver
+
+KNOTS = 200
+LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}
+SOLVERS = ("ddp", "ipopt", "fatrop")
+VELOCITY_DISTURBANCE = 1e-2  # rad/s, standard deviation
+
+
+def mpc_loop(limit_c: float, steps: int, repeats: int) -> dict:
+    lp = lift_problem(KNOTS, limit_c)
+    solvers = {name: make_solver(lp, name) for name in SOLVERS}
+    first = {name: s.solve(lp.x0, lp.params, initial_guess(lp)) for name, s in solvers.items()}
+    long_params = np.vstack([lp.params, np.repeat(lp.params[-1:], steps, axis=0)])
+    rng = np.random.default_rng(0)
+    step = lp.problem.functions.step
+    x, prev = lp.x0, first
+    per_step = {name: [] for name in SOLVERS}
+    active_steps = 0
+    for j in range(1, steps + 1):
+        x = np.asarray(step(x, prev["ddp"].us[0], long_params[j - 1])).ravel()
+        x[1] += VELOCITY_DISTURBANCE * rng.standard_normal()
+        params = long_params[j: j + KNOTS + 1]
+        now = {}
+        for name, solver in solvers.items():
+            warm = shifted_nlp_warm_start(prev[name], lp.problem, shift=1)
+            if j == 1:
+                solver.solve(x, params, warm)  # untimed: IPOPT builds its dual-warm-start instance here
+            result, timing = timed_solves(lambda: solver.solve(x, params, warm), repeats)
+            per_step[name].append({**timing, "iterations": int(result.iterations), "status": result.status,
+                                   "cost": float(result.cost), "max_violation": float(result.max_constraint_violation)})
+            now[name] = result
+        if "winding_limit" in binding_constraints(dataclasses.replace(lp, x0=x, params=params), now["ddp"]):
+            active_steps += 1
+        prev = now
+    out = {"steps": steps, "repeats": repeats, "winding_limit_binding_in_prediction_steps": active_steps}
+    for name in SOLVERS:
+        rows = per_step[name]
+        walls = [r["wall_median_s"] for r in rows]
+        out[name] = {"cold_first_s": first[name].solve_s, "cold_first_iterations": int(first[name].iterations),
+                     "warm_step_median_s": statistics.median(walls), "warm_step_max_s": max(walls),
+                     "warm_step_solver_median_s": statistics.median(r["solver_median_s"] for r in rows),
+                     "iterations_median": statistics.median(r["iterations"] for r in rows),
+                     "iterations_max": max(r["iterations"] for r in rows),
+                     "all_converged": all(r["status"] == "converged" for r in rows),
+                     "max_violation": max(r["max_violation"] for r in rows), "per_step": rows}
+    ddp = out["ddp"]["warm_step_median_s"]
+    for name in SOLVERS[1:]:
+        out[f"{name}_over_ddp_median"] = out[name]["warm_step_median_s"] / ddp
+    costs = np.array([[r["cost"] for r in per_step[name]] for name in SOLVERS])
+    out["cost_rel_diff_ddp_vs_ipopt_max"] = float(np.max(np.abs(costs[0] - costs[1]) / np.abs(costs[1])))
+    worst, ipopt = out["ddp"]["warm_step_max_s"], out["ipopt"]
+    print(f"  limit {limit_c:g} °C: DDP warm step median {1e3 * ddp:.2f} ms (max {1e3 * worst:.2f} ms, "
+          f"{out['ddp']['iterations_median']:g} it), IPOPT {1e3 * ipopt['warm_step_median_s']:.1f} ms "
+          f"({ipopt['iterations_median']:g} it), ratio {out['ipopt_over_ddp_median']:.1f}", flush=True)
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=30)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="10 steps, one solve each")
+    args = parser.parse_args()
+    steps, repeats = (10, 1) if args.quick else (args.steps, args.repeats)
+    cases = {label: mpc_loop(limit_c, steps, repeats) for label, limit_c in LIMITS_C.items()}
+    write("mpc_step", {"description": "one warm MPC step (shifted by one knot), elbow + thermal lift, N=200, "
+                                      "dt=0.1 s: DDP vs IPOPT vs fatrop, medians over a closed loop",
+                       "knots": KNOTS, "integrator": LiftSettings().integrator, "cases": cases})
+
+
+if __name__ == "__main__":
+    main()

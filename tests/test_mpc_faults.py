@@ -1,0 +1,144 @@
+"""Closed loop under faults and bad conditions: the TRUE winding stays under the limit and the result
+says what happened (per-period events, summary, report).
+
+Oracles: the plant's hidden truth (true winding and casing), the injected fault schedule (which
+samples were NaN, when the sensor stuck, which solves failed or came late, when the room warmed),
+the sensor model's own repeat probability, and the same filter without the delay compensation.
+"""
+import numpy as np
+import pytest
+
+from thermo_ddp.mpc import (ExtendedKalmanFilter, FaultySolver, MPCSettings, build_models, mpc_solver,
+                            planning_problem, run_closed_loop, stuck_run_length)
+from thermo_ddp.mpc.sweep import robustness_sweep
+
+LIMIT_C, HOLD_S, DT = 84.0, 12.0, 0.1
+
+
+def run(**faults):
+    return run_closed_loop(MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, **faults), progress=False)
+
+
+def periods_with(result, name):
+    return np.array([k for k, names in enumerate(result.events) if name in names])
+
+
+def assert_safe(r):
+    assert r.success and r.peak_winding_c <= LIMIT_C and not r.cutoff_tripped, r.report()
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return run()
+
+
+def test_nan_and_stale_samples_are_skipped_and_reported():
+    r = run(casing_nan_probability=0.2, casing_stale_probability=0.2, seed=4)
+    assert_safe(r)
+    sent_nan = np.array([m.casing_c is not None and not np.all(np.isfinite(m.casing_c)) for m in r.measurements[1:]])
+    assert sent_nan.sum() > 10
+    assert np.array_equal(periods_with(r, "casing_nan"), np.flatnonzero(sent_nan))   # every NaN named, no other
+    assert np.all(np.isfinite(r.estimated_winding_c)) and np.abs(r.estimation_error_c).max() < 0.3
+    repeats = periods_with(r, "casing_repeat")
+    casing = [m.casing_c for m in r.measurements]
+    assert repeats.size > 10 and all(casing[k + 1][0] == r.measured_casing_c[k] for k in repeats)  # = previous
+    assert "casing_stuck" not in r.event_counts()          # short stale runs are not a stuck sensor
+    assert "casing_nan" in r.report() and "casing_nan" in r.message
+
+
+def test_stuck_run_length_from_the_sensor_model():
+    # p = q / (2 sqrt(pi) sigma) = 0.282 for sigma = q = 0.1: 12 equal samples have probability 0.282^11 < 1e-6
+    assert stuck_run_length(0.1, 0.1, 1e-6) == 12
+    assert stuck_run_length(0.0, 0.1, 1e-6) > 10 ** 6     # no noise: equal samples prove nothing
+    rng = np.random.default_rng(0)   # empirical repeat probability of the sensor model
+    samples = np.round((50 + 0.1 * rng.standard_normal(200_000)) / 0.1) * 0.1
+    empirical = np.mean(samples[1:] == samples[:-1])
+    assert 0.25 < empirical <= 0.282   # the density approximation errs on the long-run (no false alarm) side
+
+
+def test_measurement_delay_of_one_second_is_compensated(nominal):
+    r = run(casing_delay_steps=10, seed=2)
+    assert_safe(r)
+    settings = r.settings
+    model, _ = build_models(settings)
+    casing = model.node_indices("casing")
+
+    def casing_error(delay):
+        ekf = ExtendedKalmanFilter(model, MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, casing_delay_steps=10,
+                                                      observer_delay_steps=delay))
+        ekf.initialise(r.measurements[0])
+        errors = []
+        for m, true in zip(r.measurements[1:], r.casing_c[1:]):
+            ekf.filter_step(m)
+            errors.append(ekf.z[casing[0]] - true)
+        return np.abs(errors[40:]).mean()
+
+    compensated, ignored = casing_error(10), casing_error(0)
+    assert compensated < 0.7 * ignored, (compensated, ignored)   # re-processing removes the lag bias
+    assert np.abs(r.estimation_error_c).max() < 0.3
+
+
+def test_stuck_sensor_is_detected_distrusted_and_backed_off(nominal):
+    stuck_at = 1.0
+    r = run(casing_stuck_time_s=stuck_at, seed=1)
+    assert_safe(r)
+    detected = periods_with(r, "casing_stuck")
+    n = stuck_run_length(r.settings.casing_noise_c, r.settings.casing_quantum_c, r.settings.stuck_false_alarm)
+    assert detected.size == 1 and stuck_at < r.time_s[detected[0] + 1] <= stuck_at + (n + 1) * DT
+    after = np.arange(detected[0] + 1, len(r.events))
+    assert all("casing_distrusted" in r.events[k] for k in after)
+    assert np.allclose(r.tightening_c[after], r.settings.sensor_fault_backoff_c)   # larger back-off
+    assert r.margin_c > r.settings.sensor_fault_backoff_c                          # it was used
+    assert r.hold_s[-1] < nominal.hold_s[-1]
+    assert "casing_stuck" not in nominal.event_counts() and "casing_distrusted" not in nominal.event_counts()
+
+
+def test_failed_and_late_solves_fall_back_to_the_previous_plan():
+    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, max_solve_s=0.5)
+    lp = planning_problem(settings, build_models(settings)[0])
+    solver = FaultySolver(mpc_solver(lp, settings), fail_calls=range(30, 90), late_calls=(120, 121), late_s=1.0)
+    r = run_closed_loop(settings, solver=solver, progress=False)
+    assert_safe(r)
+    failed, late = periods_with(r, "solve_failed"), periods_with(r, "solve_timeout")
+    assert failed.size >= 10 and late.size >= 1   # a failed period also fails its shortened retries
+    fallback = periods_with(r, "fallback_plan")
+    assert set(failed) | set(late) == set(fallback)
+    assert all(r.step_status[k] == "fallback" for k in fallback)
+    assert np.all(np.isfinite(r.current_a))
+    assert "solve_timeout" in r.report()
+
+
+def test_solver_outage_at_the_limit_derates_the_current():
+    """Every re-solve fails from mid-hold on: the previous plan's feedback, capped at the no-heating current
+    once the winding is at the planning limit."""
+    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S)
+    lp = planning_problem(settings, build_models(settings)[0])
+    solver = FaultySolver(mpc_solver(lp, settings), fail_calls=range(100, 10_000))
+    r = run_closed_loop(settings, solver=solver, progress=False)
+    assert_safe(r)
+    assert periods_with(r, "solve_failed").size > 50
+
+
+@pytest.mark.parametrize("scale", [1.2, 0.8])
+def test_payload_different_from_the_plan(scale, nominal):
+    r = run(plant_payload_scale=scale)
+    assert_safe(r)
+    if scale > 1:
+        assert "payload_mismatch" in r.event_counts()
+        assert r.hold_s[-1] < nominal.hold_s[-1]   # more current: less hold under the same limit
+    assert "payload_mismatch" not in nominal.event_counts()
+
+
+def test_room_warms_by_ten_kelvin_mid_run():
+    r = run(ambient_step_c=10.0, ambient_step_time_s=3.0)
+    assert_safe(r)
+    changes = periods_with(r, "ambient_change")
+    assert changes.size == 1 and 3.0 < r.time_s[changes[0] + 1] <= 4.1
+    after = r.planner_params[changes[0] + 1:, :, 3]
+    assert np.allclose(after, 36.0, atol=0.2) and np.allclose(r.planner_params[:20, :, 3], 26.0)
+
+
+def test_short_robustness_sweep_has_no_violation():
+    out = robustness_sweep(runs=6, workers=2, seed=1, progress=False)
+    assert out["violations"] == 0 and out["cutoff_trips"] == 0, out["results"]
+    assert out["min_margin_c"] >= 0 and len(out["results"]) == 6
