@@ -63,6 +63,7 @@ class DDPSettings:
     decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|)
     inner_tolerance_init: float = 1e-2      # first inner tolerance of the AL loop
     inner_tolerance_factor: float = 0.1     # inner tolerance shrink per multiplier update
+    inner_max_iterations: int = 25          # multiplier update after this many inner iterations at most
     full_second_order: bool = False         # full DDP (True) or Gauss-Newton iLQR (False)
     reg_init: float = 0.0                   # Quu regularisation at the start of a solve
     reg_min: float = 1e-9                   # smallest non-zero regularisation
@@ -74,19 +75,21 @@ class DDPSettings:
     penalty_init: float = 100.0             # AL penalty rho at a cold start
     penalty_factor: float = 10.0
     penalty_max: float = 1e8
+    infeasibility_growth: float = 1e3       # "infeasible" if the violation has not halved while rho grew this much
     box_iterations: int = 2                 # projected-Newton passes per knot (nu > 1)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
     compiler_flags: tuple = ("-O2", "-march=native")  # gcc; 2-3x faster code than -O1 for the 7-DOF arm
 
     def __post_init__(self):
-        ints = ("max_iterations", "box_iterations")
+        ints = ("max_iterations", "box_iterations", "inner_max_iterations")
         for name in ints:
             v = getattr(self, name)
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
                     "expected an integer >= 0")
         positive = ("tolerance", "decrement_tolerance", "gap_tolerance", "constraint_tolerance",
                     "inner_tolerance_init", "reg_max",
-                    "reg_factor", "penalty_init", "penalty_factor", "penalty_max", "line_search_min_step")
+                    "reg_factor", "penalty_init", "penalty_factor", "penalty_max", "line_search_min_step",
+                    "infeasibility_growth")
         for name in positive:
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0,
@@ -210,10 +213,11 @@ class DDPSolver:
                                 {k: [] for k in HISTORY_KEYS})
         reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
         viol_prev = np.inf
+        al_log: list[tuple[float, float]] = []  # (penalty, violation) at each multiplier update
         hist = {k: [] for k in HISTORY_KEYS}
         status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
         policy = values = None
-        iteration = passes = 0
+        iteration = passes = inner = 0
         while iteration < s.max_iterations and passes < 4 * s.max_iterations + 20:
             passes += 1
             policy_try, summary, values_try = be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
@@ -229,15 +233,24 @@ class DDPSolver:
             gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
             kkt_c = self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho)
             flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)) and reg <= s.reg_min
-            if (stat <= omega or flat) and gap <= s.gap_tolerance:
-                if (stat <= s.tolerance or flat) and kkt_c <= s.constraint_tolerance:
+            inner_done = (stat <= omega or flat) and gap <= s.gap_tolerance
+            if inner_done or (has_constraints and inner >= s.inner_max_iterations and kkt_c > s.constraint_tolerance):
+                if inner_done and (stat <= s.tolerance or flat) and kkt_c <= s.constraint_tolerance:
                     status = "converged"
                     message = ("predicted decrease below rounding" if stat > s.tolerance else "stationarity") + \
                         ", gaps and constraints within tolerance"
                     self._record(hist, it_, lam, lamN, rho, stat, gap, 0.0, reg, 0.0)
                     break
-                omega = max(s.tolerance, omega * s.inner_tolerance_factor)
+                if inner_done:
+                    omega = max(s.tolerance, omega * s.inner_tolerance_factor)
                 if has_constraints and kkt_c > s.constraint_tolerance:
+                    inner = 0
+                    al_log.append((rho, self._violation(it_)))
+                    if self._stalled(al_log):
+                        status = "infeasible"
+                        message = (f"locally infeasible: the violation {al_log[-1][1]:.3g} did not halve while "
+                                   f"the penalty grew {s.infeasibility_growth:g}x")
+                        break
                     lam, lamN, rho, viol_prev = self._update_multipliers(it_, lam, lamN, rho, viol_prev)
                     continue
             alpha, trial, mu_gap = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
@@ -248,7 +261,7 @@ class DDPSolver:
                     status, message = "line_search_failed", "no acceptable step up to reg_max"
                     break
                 continue
-            iteration += 1
+            iteration, inner = iteration + 1, inner + 1
             step = alpha * float(np.max(np.abs(policy[:, : pr.nu])))
             it_ = trial
             if alpha == 1.0:
@@ -266,9 +279,20 @@ class DDPSolver:
     def _increase(self, reg: float) -> float:
         return max(reg * self.settings.reg_factor, self.settings.reg_min)
 
+    @staticmethod
+    def _violation(it_) -> float:
+        return max(float(np.max(it_.G, initial=0.0)), float(np.max(it_.GN, initial=0.0)))
+
+    def _stalled(self, al_log: list[tuple[float, float]]) -> bool:
+        """True when, since the penalty was ``infeasibility_growth`` times smaller, the violation has
+        not halved: more penalty no longer buys feasibility (a local infeasibility certificate)."""
+        rho, viol = al_log[-1]
+        earlier = [v for r, v in al_log if r * self.settings.infeasibility_growth <= rho]
+        return bool(earlier) and viol > 0.5 * earlier[-1] and viol > 10 * self.settings.constraint_tolerance
+
     def _update_multipliers(self, it_, lam, lamN, rho, viol_prev):
         s = self.settings
-        viol = max(float(np.max(it_.G, initial=0.0)), float(np.max(it_.GN, initial=0.0)))
+        viol = self._violation(it_)
         lam = np.maximum(0.0, lam + rho * it_.G)
         lamN = np.maximum(0.0, lamN + rho * it_.GN)
         if viol > 0.25 * viol_prev:
