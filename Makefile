@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: plan test bench clean
+.PHONY: plan test bench bench-quick bench-croco clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,5 +21,11 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
+bench-quick: $(STAMP)
+	$(PY) benchmarks/run_all.py --quick
+
+bench-croco: $(STAMP)
+	$(PY) benchmarks/bench_arm_crocoddyl.py
+
 clean:
-	rm -rf $(VENV) build src/*.egg-info .pytest_cache
+	rm -rf $(VENV) .venv-croco build src/*.egg-info .pytest_cache
