@@ -16,7 +16,7 @@ import pytest
 from thermo_ddp.actuated_arm import load_model
 from thermo_ddp.arm import ELBOW
 from thermo_ddp.errors import InputError
-from thermo_ddp.loop import (LoopSettings, SensorNodeFilter, claim, loop_files, mpc_settings, robot_parameters,
+from thermo_ddp.loop import (LoopSettings, claim, loop_files, mpc_settings, robot_parameters,
                              truth_model, truth_parameters)
 from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
 from thermo_ddp.mpc.plant import Measurement
@@ -88,30 +88,11 @@ def test_claim_tells_a_violation_from_wasted_margin():
     assert not failed["improved_holds"] and "FAILED" in failed["statement"]
 
 
-def _measurements(rng, n, casing):
-    return [Measurement(0.1 * k, np.array([-0.05]), np.zeros(1), np.array([rng.uniform(0, 3)]),
-                        None if k % 3 == 2 else np.array([casing + 0.05 * k])) for k in range(n)]
-
-
-def test_sensor_node_filter_is_the_project_ekf_on_a_casing_model():
-    model = load_model((ELBOW,), payload_kg=40.0)
-    settings = MPCSettings()
-    ours, ref = SensorNodeFilter(model, settings), ExtendedKalmanFilter(model, settings)
-    ms = _measurements(np.random.default_rng(1), 30, 43.0)
-    for f in (ours, ref):
-        f.initialise(ms[0])
-    for m in ms[1:]:
-        for f in (ours, ref):
-            f.predict(m.current_a)
-            f.update(m)
-    assert np.array_equal(ours.z, ref.z) and np.array_equal(ours.P, ref.P)
-
-
-def test_sensor_node_filter_measures_the_winding_of_a_one_node_model(chain):
+def test_the_ekf_measures_the_winding_of_a_one_node_model(chain):
     out, _ = chain
     model = load_model((ELBOW,), payload_kg=40.0, parameter_files={ELBOW: out / "models" / f"{ELBOW}_original.toml"})
     assert model.networks[ELBOW].nodes == ("winding",)
-    f = SensorNodeFilter(model, MPCSettings())
+    f = ExtendedKalmanFilter(model, MPCSettings())
     f.initialise(Measurement(0.0, np.array([-0.05]), np.zeros(1), np.zeros(1), np.array([43.0])))
     assert f.winding_c[0] == pytest.approx(43.0) and f.resistance_scale == 1.0
     for k in range(200):   # a hot sensor reading held: the estimate follows the measured node

@@ -41,7 +41,10 @@ class ActuatedArm:
     outputs: ca.Function = field(repr=False)
 
     @classmethod
-    def from_parameters(cls, arm_settings: ArmSettings, params: Mapping[str, JointParameters]) -> "ActuatedArm":
+    def from_parameters(cls, arm_settings: ArmSettings, params: Mapping[str, JointParameters],
+                        networks: Mapping[str, ThermalNetwork] | None = None) -> "ActuatedArm":
+        """The model from parameter files; ``networks`` replaces the files' thermal networks (e.g. a
+        simulated robot's own network, with heat sources the contract's models do not have)."""
         for j in arm_settings.joints:
             if j not in params:
                 raise InputError("model", "parameters", j, "no parameter file for this joint")
@@ -49,7 +52,7 @@ class ActuatedArm:
                 raise InputError(params[j].path, "joint.name", params[j].joint, f"expected {j}")
         arm = build_arm(arm_settings, {j: params[j].motor.armature_kg_m2 for j in arm_settings.joints})
         params = {j: params[j] for j in arm.joints}
-        networks = {j: network_from_parameters(p.thermal) for j, p in params.items()}
+        networks = {j: (networks or {}).get(j) or network_from_parameters(p.thermal) for j, p in params.items()}
         return cls(arm, params, networks, *_build_functions(arm, params, networks))
 
     # --- names and layout -------------------------------------------------------------
@@ -81,8 +84,12 @@ class ActuatedArm:
         return self.state_names.index(f"{joint}:{quantity}")
 
     def node_indices(self, node: str) -> list[int]:
-        """Index of thermal ``node`` for each joint (KeyError if a joint lacks it)."""
+        """Index of thermal ``node`` for each joint (ValueError if a joint lacks it)."""
         return [self.index(j, f"{node}_c") for j in self.joints]
+
+    def sensor_indices(self) -> list[int]:
+        """Index of each joint's measured node (the casing; the winding of a one-node network)."""
+        return [self.index(j, f"{self.networks[j].sensor_node}_c") for j in self.joints]
 
     @property
     def ambient_c(self) -> float:

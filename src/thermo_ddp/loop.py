@@ -22,8 +22,7 @@ Truth mapping (testbed ``PlantParameters`` -> the plant's ``JointParameters`` an
   gripper, the same as the planner's, so the closed loop compares thermal models only.
 
 The original model's sensor node is its winding (the report assumed the sensor reads the winding);
-the project's EKF measures a ``casing`` node, so the original model is observed by
-:class:`SensorNodeFilter`, the same filter with the measured node taken from the network.
+the EKF measures each model's own sensor node.
 """
 from __future__ import annotations
 
@@ -39,14 +38,12 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ._config import require, settings_from_mapping
-from .actuated_arm import ActuatedArm, _build_functions, default_parameter_file, load_model
-from .arm import ELBOW, ArmSettings, build_arm
+from .actuated_arm import ActuatedArm, default_parameter_file
+from .arm import ELBOW, ArmSettings
 from .diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from .identify.thermal import parameter_file
 from .lift import LiftPlan, LiftSettings, plan_lift
-from .mpc import ExtendedKalmanFilter, MPCSettings, ObserverSettings, Plant, RecedingHorizonController, \
-    planning_problem
-from .mpc.plant import Measurement
+from .mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from .parameters import JointParameters, load_parameters, parameters_from_dict, save_parameters
 from .testbed import Ambient, PlantParameters, SimulatedRecording, biceps, static_3a, static_4a
 from .thermal import AMBIENT, HeatSource, Link, ThermalNetwork
@@ -168,121 +165,13 @@ def truth_model(robot: PlantParameters, payload_kg: float, base: JointParameters
     """The closed loop's plant: the Talos elbow with ``payload_kg`` at the gripper and the robot's true
     motor and thermal network (friction heat split as in the testbed).
 
-    Uses ``actuated_arm._build_functions`` (no public constructor takes a custom network yet)."""
+    """
     params = truth_parameters(robot, base)
-    settings = ArmSettings(joints=(ELBOW,), payload_kg=payload_kg)
-    arm = build_arm(settings, {ELBOW: params.motor.armature_kg_m2})
-    networks = {ELBOW: truth_network(robot, params)}
-    return ActuatedArm(arm, {ELBOW: params}, networks, *_build_functions(arm, {ELBOW: params}, networks))
-
-
-# ----------------------------------------------------------------------------- observer
-class SensorNodeFilter(ExtendedKalmanFilter):
-    """The project's EKF with the measured temperature on the network's ``sensor_node`` (the winding of
-    a one-node model, the casing otherwise). When the model's idle temperature equals ambient (one node,
-    constant ambient: no drive heat), the first sample sets the temperatures by a common offset and the
-    resistance scale starts at 1."""
-
-    def __init__(self, model: ActuatedArm, settings: MPCSettings, observer: ObserverSettings = ObserverSettings()):
-        nets = [model.networks[j] for j in model.joints]
-        sensor = {net.sensor_node for net in nets}
-        require(len(sensor) == 1, "SensorNodeFilter", "sensor_node", sensor, "joints must share one sensor node")
-        self._sensor_node = sensor.pop()
-        if self._sensor_node == "casing":
-            super().__init__(model, settings, observer)
-            return
-        casing_free = _RenamedNodes(model, {"casing": self._sensor_node})
-        super().__init__(casing_free, settings, observer)
-        self.model = model
-
-    def initialise(self, m: Measurement) -> None:
-        model = self.model
-        idle = model.idle_temperatures()
-        rise = idle[np.array(self._casing) - 2 * model.nu] - model.ambient_c
-        if self._sensor_node == "casing" and np.all(np.abs(rise) > 1e-6):
-            return super().initialise(m)
-        if m.casing_c is None:
-            raise ValueError("the observer needs a sensor sample to start")
-        temps = idle + float(np.mean(m.casing_c - idle[np.array(self._casing) - 2 * model.nu]))
-        x = np.concatenate([m.q_rad, m.v_rad_s, temps])
-        self.z = np.append(x, 1.0) if self.augmented else x
-        o = self.observer
-        p0 = np.concatenate([self._r[:2 * model.nu], np.full(model.nx - 2 * model.nu, o.initial_temperature_c ** 2)])
-        self.P = np.diag(np.append(p0, o.initial_resistance_scale ** 2) if self.augmented else p0)
-
-
-class _RenamedNodes:
-    """A read-only view of an ActuatedArm whose ``node_indices`` answers one node name for another
-    (lets the EKF's constructor find the measured node of a network without a casing)."""
-
-    def __init__(self, model: ActuatedArm, alias: dict[str, str]):
-        self._model, self._alias = model, alias
-
-    def __getattr__(self, name: str):
-        return getattr(self._model, name)
-
-    def node_indices(self, node: str) -> list[int]:
-        return self._model.node_indices(self._alias.get(node, node))
+    return ActuatedArm.from_parameters(ArmSettings(joints=(ELBOW,), payload_kg=payload_kg), {ELBOW: params},
+                                       {ELBOW: truth_network(robot, params)})
 
 
 # ----------------------------------------------------------------------------- closed loop
-@dataclasses.dataclass(frozen=True)
-class ClosedLoopRun:
-    """One receding-horizon execution of the lift on the true plant (names as in ``mpc.ClosedLoopResult``).
-
-    Instants k = 0..K: ``time_s``, true ``winding_c``/``casing_c``/``drive_c``/``q_rad``, the observer's
-    ``estimated_winding_c``, the last ``measured_casing_c``. Periods k -> k+1: ``current_a``, ``solve_s``
-    (all solves of the period), ``step_status``, ``hold_s`` (the planned hold after the period).
-    ``peak_winding_c`` includes the plant's sub-steps."""
-
-    settings: MPCSettings
-    time_s: np.ndarray
-    winding_c: np.ndarray
-    casing_c: np.ndarray
-    drive_c: np.ndarray | None
-    q_rad: np.ndarray
-    estimated_winding_c: np.ndarray
-    measured_casing_c: np.ndarray
-    current_a: np.ndarray
-    solve_s: np.ndarray
-    step_status: tuple[str, ...]
-    hold_s: np.ndarray
-    peak_winding_c: float
-    safety_cutoff_c: float
-    cutoff_tripped: bool
-
-    @property
-    def limit_c(self) -> float:
-        return self.settings.limit_c
-
-    @property
-    def margin_c(self) -> float:
-        """Limit minus the peak TRUE winding (negative: the limit was exceeded)."""
-        return self.limit_c - self.peak_winding_c
-
-    @property
-    def success(self) -> bool:
-        return self.margin_c >= 0 and not self.cutoff_tripped
-
-    @property
-    def status(self) -> str:
-        if self.cutoff_tripped:
-            return "safety_cutoff"
-        return "completed" if self.margin_c >= 0 else "winding_limit_exceeded"
-
-    @property
-    def achieved_hold_s(self) -> float:
-        """The hold executed: the controller's planned hold after the last period."""
-        return float(self.hold_s[-1])
-
-    @property
-    def time_over_limit_s(self) -> float:
-        return float(np.sum(self.winding_c > self.limit_c) * self.settings.control_period_s)
-
-    def warm_solve_s(self) -> np.ndarray:
-        return self.solve_s[1:]
-
-
 def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path) -> MPCSettings:
     """The closed loop's settings (the project's MPC defaults otherwise: 0.1 s period, RK4, sensors)."""
     lift = LiftSettings()
@@ -293,60 +182,12 @@ def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path) -> MP
                        parameter_file=str(model_file))
 
 
-def execute(model_file: Path, plant_model: ActuatedArm, settings: MPCSettings, progress: bool = False) -> ClosedLoopRun:
-    """Receding-horizon lift with the planner's model from ``model_file`` on ``plant_model`` (the truth):
-    the composition of ``mpc.run_closed_loop`` with a given plant and :class:`SensorNodeFilter`."""
-    model = load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files={ELBOW: model_file})
-    lp = planning_problem(settings, model)
-    controller = RecedingHorizonController(lp, settings)
-    plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad]), settings,
-                  np.random.default_rng(settings.seed))
-    observer = SensorNodeFilter(model, settings)
-    m = plant.measure()
-    while m.casing_c is None:
-        plant.apply(np.zeros(model.nu))
-        m = plant.measure()
-    observer.initialise(m)
-    rows: dict[str, list] = {k: [] for k in ("x", "est", "casing", "steps")}
-    casing, tripped = m.casing_c.copy(), False
-
-    def instant():
-        rows["x"].append(plant.x.copy())
-        rows["est"].append(float(observer.winding_c[0]))
-        rows["casing"].append(float(casing[0]))
-
-    instant()
-    steps = controller.task_knots + int(round(settings.extra_s / settings.control_period_s))
-    for k in tqdm(range(steps), desc=f"closed loop {model_file.stem} {settings.limit_c:g} °C", unit="period",
-                  disable=not progress, leave=False):
-        x0 = observer.state
-        step = controller.start(x0) if k == 0 else controller.step(x0)
-        plant.apply(step.current_a)
-        rows["steps"].append(step)
-        m = plant.measure()
-        observer.predict(m.current_a)
-        observer.update(m)
-        casing = m.casing_c.copy() if m.casing_c is not None else casing
-        instant()
-        if m.casing_c is not None and np.any(m.casing_c >= plant.safety_cutoff_c):
-            tripped = True
-            log.warning("t = %.1f s: measured casing %.1f °C: safety cut-off", plant.time_s, m.casing_c.max())
-            break
-    return _run(settings, plant, rows, tripped)
-
-
-def _run(settings: MPCSettings, plant: Plant, rows: dict, tripped: bool) -> ClosedLoopRun:
-    model, xs, steps = plant.model, np.array(rows["x"]), rows["steps"]
-
-    def node(name):
-        return xs[:, model.node_indices(name)[0]]
-
-    drive = node("drive") if "drive" in model.networks[model.joints[0]].nodes else None
-    return ClosedLoopRun(settings, np.arange(xs.shape[0]) * settings.control_period_s, node("winding"),
-                         node("casing"), drive, xs[:, 0], np.array(rows["est"]), np.array(rows["casing"]),
-                         np.array([s.current_a[0] for s in steps]), np.array([s.solve_s for s in steps]),
-                         tuple(s.status for s in steps), np.array([s.hold_s for s in steps]),
-                         float(plant.peak_winding_c), plant.safety_cutoff_c, tripped)
+def execute(model_file: Path, plant_model: ActuatedArm, settings: MPCSettings,
+            progress: bool = False) -> ClosedLoopResult:
+    """Receding-horizon lift with the planner's model from ``model_file`` (``settings.parameter_file``) on
+    ``plant_model``, the robot's true physics."""
+    settings = dataclasses.replace(settings, parameter_file=str(model_file))
+    return run_closed_loop(settings, plant_model=plant_model, progress=progress)
 
 
 # ----------------------------------------------------------------------------- the chain
@@ -357,7 +198,7 @@ class Execution:
     model: str
     limit_c: float
     plan: LiftPlan
-    run: ClosedLoopRun
+    run: ClosedLoopResult
 
     def row(self) -> dict[str, Any]:
         r, p = self.run, self.plan
@@ -625,6 +466,6 @@ def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[s
     return table
 
 
-__all__ = ["ClosedLoopRun", "Execution", "LoopResult", "LoopSettings", "SensorNodeFilter", "claim", "execute",
+__all__ = ["Execution", "LoopResult", "LoopSettings", "claim", "execute",
            "identify_models", "loop_files", "record_experiments", "robot_parameters", "run_loop", "truth_model",
            "truth_network", "truth_parameters"]

@@ -79,6 +79,15 @@ class ClosedLoopResult:
         return self.settings.limit_c
 
     @property
+    def achieved_hold_s(self) -> float:
+        """The hold executed: the controller's planned hold after the last period."""
+        return float(self.hold_s[-1])
+
+    @property
+    def time_over_limit_s(self) -> float:
+        return float(np.sum(self.winding_c > self.limit_c) * self.settings.control_period_s)
+
+    @property
     def margin_c(self) -> float:
         """Limit minus the peak TRUE winding (negative: the limit was exceeded)."""
         return self.limit_c - self.peak_winding_c
@@ -250,15 +259,18 @@ class _Supervisor:
 
 
 def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observer: ObserverSettings | None = None,
-                    progress: bool = True, **options) -> ClosedLoopResult:
+                    plant_model: ActuatedArm | None = None, progress: bool = True, **options) -> ClosedLoopResult:
     """Lift, hold and lower in closed loop: the plant (mismatched model, fine RK4, noisy sensors), the EKF
     and the receding-horizon DDP controller. Options: the fields of :class:`MPCSettings` (or ``settings``).
-    ``solver``: a DDP solver built earlier for the same planning problem (see ``controller.mpc_solver``)."""
+    ``solver``: a DDP solver built earlier for the same planning problem (see ``controller.mpc_solver``).
+    ``plant_model``: the robot's own model (e.g. a simulated robot's true physics) instead of the planner's
+    model perturbed by the settings' plant scales."""
     if settings is None:
         settings = settings_from_mapping(MPCSettings, options, _SRC)
     elif options:
         raise TypeError("give either settings or options, not both")
-    model, plant_model = build_models(settings)
+    model, perturbed = build_models(settings)
+    plant_model = plant_model or perturbed
     lp = planning_problem(settings, model)
     controller = RecedingHorizonController(lp, settings, solver)
     rng = np.random.default_rng(settings.seed)

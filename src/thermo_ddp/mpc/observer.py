@@ -93,7 +93,7 @@ class ExtendedKalmanFilter:
         self._step_jacobians = step_jacobians(step)
         n, nx = model.nu, model.nx
         self.nz = nx + int(self.augmented)
-        self._casing, self._winding = model.node_indices("casing"), model.node_indices("winding")
+        self._casing, self._winding = model.sensor_indices(), model.node_indices("winding")
         self._measured = np.concatenate([np.arange(2 * n), self._casing])
         temp_var = settings.casing_noise_c ** 2 + settings.casing_quantum_c ** 2 / 12
         self._r = np.concatenate([np.full(n, settings.position_noise_rad ** 2),
@@ -130,7 +130,8 @@ class ExtendedKalmanFilter:
 
     # --- filter -------------------------------------------------------------------------
     def initialise(self, m: Measurement) -> None:
-        """Idle equilibrium scaled to the measured casing; q, v from the encoders."""
+        """Idle equilibrium scaled (or, without idle heat, shifted) to the measured sensor node (the casing,
+        or the winding of a one-node model); q, v from the encoders."""
         model, o = self.model, self.observer
         if m.casing_c is None:
             raise ValueError("the observer needs a casing sample to start")
@@ -144,9 +145,12 @@ class ExtendedKalmanFilter:
             p0[2 * model.nu + np.array(drive, dtype=int)] = o.initial_drive_c ** 2
         else:
             idle = model.idle_temperatures(amb)
-            scale = float(np.clip(np.mean((m.casing_c - amb) / (idle[np.array(self._casing) - 2 * model.nu] - amb)),
-                                  *o.scale_bounds))
-            temps = amb + scale * (idle - amb)
+            rise = idle[np.array(self._casing) - 2 * model.nu] - amb
+            if np.all(np.abs(rise) > 1e-6):  # idle heat (drive): scale the idle rise to the sample
+                scale = float(np.clip(np.mean((m.casing_c - amb) / rise), *o.scale_bounds))
+                temps = amb + scale * (idle - amb)
+            else:                            # no idle heat: shift every node by the sample's offset
+                scale, temps = 1.0, idle + float(np.mean(m.casing_c - amb - rise))
         x = np.concatenate([m.q_rad, m.v_rad_s, temps])
         self.z = np.append(x, scale) if self.augmented else x
         self.P = np.diag(np.append(p0, o.initial_resistance_scale ** 2) if self.augmented else p0)

@@ -73,7 +73,7 @@ class Plant:
         dt = settings.control_period_s / settings.plant_substeps
         self._period = model.step(dt, "rk4").mapaccum(settings.plant_substeps)
         self._peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
-        self._casing = model.node_indices("casing")
+        self._casing = model.sensor_indices()
         self._winding = model.node_indices("winding")
         self._delayed = collections.deque(maxlen=settings.casing_delay_steps + 1)
         self._delivered: np.ndarray | None = None
