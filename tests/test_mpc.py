@@ -14,7 +14,7 @@ from thermo_ddp.lift import initial_guess, make_solver
 from thermo_ddp.mpc import (ExtendedKalmanFilter, MPCSettings, Plant, RecedingHorizonController, build_models,
                             mpc_solver, perturbed_model, planning_problem, run_closed_loop, scaled_ode)
 from thermo_ddp.integrators import make_step
-from thermo_ddp.solvers import DDPSettings, IpoptSolver, WarmStart
+from thermo_ddp.solvers import DDPSettings, IpoptSolver
 
 LIMIT_C = 84.0
 HOLD_S = 12.0  # longer than the plant can hold under 84 °C (the nominal model alone allows ~12.6 s)
