@@ -46,7 +46,7 @@ from .lift import LiftPlan, LiftSettings, plan_lift
 from .mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from .parameters import JointParameters, load_parameters, parameters_from_dict, save_parameters
 from .testbed import Ambient, PlantParameters, SimulatedRecording, biceps, static_3a, static_4a
-from .thermal import AMBIENT, HeatSource, Link, ThermalNetwork
+from .thermal import HeatSource, ThermalNetwork, network_from_parameters
 
 log = logging.getLogger(__name__)
 _SRC = "loop"
@@ -142,23 +142,13 @@ def truth_parameters(robot: PlantParameters, base: JointParameters | None = None
 
 
 def truth_network(robot: PlantParameters, params: JointParameters) -> ThermalNetwork:
-    """The robot's thermal network: as the contract's, but the friction heat split between the winding
+    """The robot's thermal network: the contract's, but the friction heat split between the winding
     (``friction_to_winding``) and the casing, as in the testbed."""
-    th, r = params.thermal, robot
-    fric = float(r.friction_heating)
-    nodes = ("winding", "casing")
-    caps = (th["winding_capacity_j_per_k"], th["casing_capacity_j_per_k"])
-    links = (Link("winding", "casing", th["winding_casing_k_per_w"]),
-             Link("casing", AMBIENT, th["casing_ambient_k_per_w"]))
-    sources = (HeatSource("winding", "joule_w"), HeatSource("winding", "friction_w", fric * r.friction_to_winding),
-               HeatSource("casing", "friction_w", fric * (1 - r.friction_to_winding)))
-    if r.drive_heating:
-        nodes += ("drive",)
-        caps += (th["drive_capacity_j_per_k"],)
-        links += (Link("drive", "casing", th["drive_casing_k_per_w"]),
-                  Link("drive", AMBIENT, th["drive_ambient_k_per_w"]))
-        sources += (HeatSource("drive", "current_sq_a2", th["drive_loss_w_per_a2"], th["drive_idle_w"]),)
-    return ThermalNetwork(nodes, caps, links, sources, sensor_node="casing")
+    net = network_from_parameters(params.thermal)
+    fric = float(robot.friction_heating)
+    split = (HeatSource("winding", "friction_w", fric * robot.friction_to_winding),
+             HeatSource("casing", "friction_w", fric * (1 - robot.friction_to_winding)))
+    return dataclasses.replace(net, sources=tuple(x for x in net.sources if x.name != "friction_w") + split)
 
 
 def truth_model(robot: PlantParameters, payload_kg: float, base: JointParameters | None = None) -> ActuatedArm:

@@ -1,5 +1,4 @@
-"""The thermal pendulum toy used by bench_ddp_backends.py (a copy of the toy in tests/test_ddp_vs_ipopt.py,
-kept here so that benchmarks never import tests).
+"""A small example of the OCP API: the "thermal pendulum", used by the solver tests and benchmarks.
 
 A 1-DOF pendulum driven by a current u, torque = k u - m g l sin(q) - b v, and a winding temperature
 (one node, or winding -> casing -> ambient with a drive heating the casing). Constraints: winding
@@ -9,8 +8,9 @@ per-knot parameter.
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
-from thermo_ddp.ocp import Constraint, Cost, OptimalControlProblem
+from .ocp import Constraint, Cost, OptimalControlProblem
 
 # toy constants (SI); chosen so the limits bite within a 2 s horizon
 MASS, LENGTH, GRAV, DAMP = 1.0, 0.5, 9.81, 0.1
@@ -51,3 +51,8 @@ def thermal_pendulum(horizon=100, dt=0.02, t_max=80.0, n_thermal=1):
     terminal_constraints = [Constraint("winding_end", ca.Function("g", [x, p], [tw - t_max], ["x", "p"], ["g"]))]
     return OptimalControlProblem(step, horizon, costs, terminal, constraints, terminal_constraints,
                                  u_lb=[-U_MAX], u_ub=[U_MAX], name="thermal_pendulum")
+
+
+def x0_of(n_thermal: int = 1) -> np.ndarray:
+    """Start at rest, hanging, every thermal node 5 K above ambient."""
+    return np.array([0.0, 0.0] + [T_AMB + 5.0] * n_thermal)
