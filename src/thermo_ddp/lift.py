@@ -243,29 +243,44 @@ def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limi
     return float(np.interp(limit_c, w[i - 1:i + 1], traj.time_s[i - 1:i + 1]))
 
 
-def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> tuple[LiftProblem | None,
-                                                                           SolverResult | None, int, float]:
-    """The longest hold (in knots, inside the fixed horizon) that the solver finds feasible.
+@dataclasses.dataclass(frozen=True)
+class HoldSearch:
+    """The probes of :func:`longest_feasible_hold`: hold (knots) -> (problem, result)."""
 
-    A galloping search from ``estimate_s`` (the time-to-limit at the goal) brackets the boundary,
-    then bisection closes it; every verdict is a complete optimisation. Returns the problem and
-    result of the longest feasible hold (None, None when not even touching the goal is feasible),
-    the number of solves and their total solve time.
+    knots: int  # the longest feasible hold in knots; -1 when not even touching the goal is feasible
+    probes: Mapping[int, tuple[LiftProblem, SolverResult]]
+
+    @property
+    def best(self) -> tuple[LiftProblem, SolverResult]:
+        """The longest feasible probe, or the shortest infeasible one when none is feasible."""
+        return self.probes[self.knots if self.knots >= 0 else min(self.probes)]
+
+    @property
+    def solve_s(self) -> float:
+        return sum(r.solve_s for _, r in self.probes.values())
+
+
+def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSearch:
+    """The longest hold, up to the requested one (the fixed horizon), that the solver finds feasible.
+
+    A galloping search from ``estimate_s`` (the time-to-limit at the goal) brackets the boundary, then
+    bisection closes it; every verdict is a complete optimisation, warm-started from the nearest
+    feasible probe. A feasible request costs one solve when the estimate says it fits.
     """
-    cache: dict[int, tuple[LiftProblem, SolverResult]] = {}
+    probes: dict[int, tuple[LiftProblem, SolverResult]] = {}
 
     def feasible(knots: int) -> bool:
-        if knots not in cache:
+        if knots not in probes:
             probe = lp.with_hold(knots * lp.settings.dt_s)
-            done = [k for k, (_, r) in cache.items() if _feasible(r)]
-            warm = WarmStart.from_result(cache[min(done, key=lambda k: abs(k - knots))][1]) if done else None
-            cache[knots] = (probe, solve(probe, solver, warm))
-            log.info("hold %.1f s: %s", probe.hold_s, cache[knots][1].status)
-        return _feasible(cache[knots][1])
+            done = [k for k, (_, r) in probes.items() if _feasible(r)]
+            warm = WarmStart.from_result(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
+            probes[knots] = (probe, solve(probe, solver, warm))
+            log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
+        return _feasible(probes[knots][1])
 
-    top = lp.hold_knots[1] - lp.hold_knots[0]  # known infeasible
-    guess = int(np.clip(np.floor(estimate_s / lp.settings.dt_s), 0, top - 1))
-    lo, hi, step = -1, top, 1
+    top = lp.hold_knots[1] - lp.hold_knots[0]  # the request
+    guess = int(np.clip(np.floor(estimate_s / lp.settings.dt_s), 0, top))
+    lo, hi, step = -1, top + 1, 1
     if feasible(guess):
         lo = guess
         while lo + step < hi and feasible(lo + step):
@@ -279,9 +294,7 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> tuple[L
     while hi - lo > 1:
         mid = (lo + hi) // 2
         lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
-    solves, total_s = len(cache), sum(r.solve_s for _, r in cache.values())
-    best = cache.get(lo, (None, None))
-    return best[0], best[1], solves, total_s
+    return HoldSearch(lo, probes)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -372,24 +385,23 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float = 84.0, hold_s: float = 1
                                                     "hold_s": hold_s, **options}, _SRC)
     lp = build_lift_problem(settings)
     solver = make_solver(lp)
-    result = solve(lp, solver)
-    total, solves = result.solve_s, 1
-    achieved = settings.hold_s
-    if _feasible(result):
-        status, message = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C"
-    elif not settings.find_longest_hold:
-        status, message, achieved = "infeasible", f"the {hold_s:.1f} s hold is infeasible ({result.message})", 0.0
+    top = lp.hold_knots[1] - lp.hold_knots[0]
+    if settings.find_longest_hold:
+        search = longest_feasible_hold(lp, solver, time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c))
+        (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
     else:
-        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c)  # holding from the start
-        best_lp, best, probes, probe_s = longest_feasible_hold(lp, solver, estimate)
-        solves, total = solves + probes, total + probe_s
-        if best is None:
-            status, achieved = "infeasible", 0.0
-            message = f"the payload cannot be lifted under {limit_c:g} °C ({result.message})"
-        else:
-            lp, result, achieved = best_lp, best, best_lp.hold_s
-            status = "infeasible_hold"
-            message = f"a {hold_s:.1f} s hold is infeasible; the longest feasible hold is {achieved:.1f} s"
+        result = solve(lp, solver)
+        total, solves, knots = result.solve_s, 1, top if _feasible(result) else -1
+    achieved = max(knots, 0) * settings.dt_s
+    if knots == top:
+        status, message, achieved = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C", hold_s
+    elif knots < 0 or not settings.find_longest_hold:
+        status = "infeasible"
+        message = (f"the payload cannot be lifted under {limit_c:g} °C" if settings.find_longest_hold else
+                   f"the {hold_s:.1f} s hold is infeasible") + f" ({result.message})"
+    else:
+        status = "infeasible_hold"
+        message = f"a {hold_s:.1f} s hold is infeasible; the longest feasible hold is {achieved:.1f} s"
     binding = tuple(binding_constraints(lp, result))
     if status != "feasible" and binding:
         message += f"; binding: {', '.join(binding)}"
