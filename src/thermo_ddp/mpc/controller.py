@@ -153,9 +153,10 @@ class RecedingHorizonController:
             total, iterations, solves = total + result.solve_s, iterations + result.iterations, solves + 1
         if not self._acceptable(result, False) and self.hold_knots > 0:
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
-            best_lp, best, probes, probe_s = longest_feasible_hold(lp.with_hold(self.hold_s), self.solver, estimate)
-            solves, total = solves + probes, total + probe_s
-            if best is not None:
+            search = longest_feasible_hold(lp.with_hold(self.hold_s), self.solver, estimate)
+            solves, total = solves + len(search.probes), total + search.solve_s
+            if search.knots >= 0:
+                best_lp, best = search.best
                 log.info("requested hold %.1f s infeasible from the estimated state; planning %.1f s",
                          self.hold_s, best_lp.hold_s)
                 self.hold_knots, result, status = best_lp.hold_knots[1] - best_lp.hold_knots[0], best, "hold_shortened"
