@@ -33,9 +33,8 @@ log = logging.getLogger(__name__)
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # Full DDP: the winding limit's R(T) i^2 curvature lives in the dynamics, which Gauss-Newton
-# iLQR ignores (it then needs ~4x more iterations on this problem). Multiplier updates every 15
-# inner iterations at most: the longest-hold search's infeasible probes then end about 30 % sooner.
-DEFAULT_OPTIONS = {"ddp": DDPSettings(full_second_order=True, inner_max_iterations=15)}
+# iLQR ignores (it then needs ~4x more iterations on this problem).
+DEFAULT_OPTIONS = {"ddp": DDPSettings(full_second_order=True)}
 _SRC = "plan_lift"
 
 
