@@ -12,6 +12,21 @@ matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 MODELS = ROOT / "models"
+NOTEBOOKS = ROOT / "notebooks"
+
+
+def run_notebook(name: str, out_dir: Path, monkeypatch) -> str:
+    """Execute ``notebooks/<name>`` in its short configuration, outputs written to ``out_dir``;
+    returns the text the cells printed."""
+    import nbformat
+    from nbclient import NotebookClient
+
+    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_SHORT", "1")
+    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_OUT", str(out_dir))
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(out_dir)}}).execute()
+    return "".join(o.get("text", "") for cell in nb.cells for o in cell.get("outputs", []))
 
 
 @pytest.fixture(autouse=True, scope="session")

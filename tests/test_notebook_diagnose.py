@@ -3,23 +3,13 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 
-import nbformat
-from nbclient import NotebookClient
-
+from conftest import run_notebook
 from thermo_ddp.parameters import parameters_from_dict
-
-NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "diagnose_elbow.ipynb"
 
 
 def test_diagnose_notebook_runs_and_finds_friction_and_drive_heating(tmp_path, monkeypatch):
-    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_SHORT", "1")
-    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_OUT", str(tmp_path))
-    monkeypatch.setenv("TQDM_DISABLE", "1")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    NotebookClient(nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    text = "".join(o.get("text", "") for cell in nb.cells for o in cell.get("outputs", []))
+    text = run_notebook("diagnose_elbow.ipynb", tmp_path, monkeypatch)
     assert "missing physics:" in text and "planner network nodes: ('winding', 'casing', 'drive')" in text
     result = json.loads((tmp_path / "diagnose_elbow.json").read_text())
     assert {"friction_heating", "drive_heating"} <= {m["term"] for m in result["missing_physics"]}

@@ -2,23 +2,13 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
-import nbformat
-from nbclient import NotebookClient
-
+from conftest import run_notebook
 from thermo_ddp.parameters import load_parameters
-
-NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "close_the_loop.ipynb"
 
 
 def test_close_the_loop_notebook_runs_and_the_improved_model_holds_both_limits(tmp_path, monkeypatch):
-    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_SHORT", "1")
-    monkeypatch.setenv("THERMO_DDP_NOTEBOOK_OUT", str(tmp_path))
-    monkeypatch.setenv("TQDM_DISABLE", "1")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
-    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}).execute()
-    text = "".join(o.get("text", "") for cell in nb.cells for o in cell.get("outputs", []))
+    text = run_notebook("close_the_loop.ipynb", tmp_path, monkeypatch)
     assert "close the loop: ok" in text and "truth (hidden)" in text
     table = json.loads((tmp_path / "close_the_loop.json").read_text())
     assert table["settings"]["hold_s"] == 45.0 and table["settings"]["limits_c"] == [84.0, 140.0]
