@@ -110,3 +110,12 @@ def test_one_node_parameter_file_plans_and_writes_json(tmp_path, elbow_file):
     d = json.loads(out.read_text())
     assert d["casing_c"] == d["winding_c"] and "drive_c" not in d
     assert d["model"]["motors"]["arm_left_4_joint"]["thermal"]["model"] == "one_node"
+
+
+def test_cli_compare_prints_one_row_per_limit(capsys):
+    """`make plan` runs `thermo-ddp compare`: a row per limit; 140 °C holds at least as long as 84 °C."""
+    assert main(["compare", "--payload-kg", "40", "--hold-s", "15", "--limits-c", "84", "140"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines() if line.strip()[:3] in ("84 ", "140")]
+    assert [r[0] for r in rows] == ["84", "140"]
+    holds = {r[0]: float(r[2]) for r in rows}
+    assert holds["84"] < 15.0 <= holds["140"] and rows[1][1] == "True"
