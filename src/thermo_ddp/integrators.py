@@ -17,17 +17,21 @@ def rk4_substeps(integrator: str) -> int | None:
     return None
 
 
+def rk4(f, x, h: float, *args):
+    """One classic Runge-Kutta 4 step of x' = f(x, *args) (expressions or numbers)."""
+    k1 = f(x, *args)
+    k2 = f(x + h / 2 * k1, *args)
+    k3 = f(x + h / 2 * k2, *args)
+    k4 = f(x + h * k3, *args)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 def rk4_step(ode: ca.Function, dt: float, substeps: int = 1) -> ca.Function:
     """Classic explicit Runge-Kutta 4 step ``step(x, u, p) -> x_next`` with ``substeps`` sub-steps."""
     x, u, p = (ca.SX.sym(n, ode.size1_in(i)) for i, n in enumerate(ode.name_in()))
-    h = dt / substeps
     xn = x
     for _ in range(substeps):
-        k1 = ode(xn, u, p)
-        k2 = ode(xn + h / 2 * k1, u, p)
-        k3 = ode(xn + h / 2 * k2, u, p)
-        k4 = ode(xn + h * k3, u, p)
-        xn = xn + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xn = rk4(ode, xn, dt / substeps, u, p)
     return ca.Function("step", [x, u, p], [xn], ode.name_in(), ["x_next"])
 
 

@@ -77,7 +77,8 @@ class LiftSettings:
                 (("lift", self.lift_s), ("hold", self.hold_s), ("lower", self.lower_s), ("settle", self.settle_s))}
 
 
-def _min_jerk(s: np.ndarray) -> np.ndarray:
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk profile from 0 to 1 over s in [0, 1]."""
     return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
 
 
@@ -112,8 +113,8 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     k = settings.knots()
     hold = int(round(hold_s / settings.dt_s))
     s0, g = settings.start_rad, settings.goal_rad
-    up = s0 + (g - s0) * _min_jerk(np.arange(1, k["lift"] + 1) / k["lift"])
-    down = g + (s0 - g) * _min_jerk(np.arange(1, k["lower"] + 1) / k["lower"])
+    up = s0 + (g - s0) * min_jerk(np.arange(1, k["lift"] + 1) / k["lift"])
+    down = g + (s0 - g) * min_jerk(np.arange(1, k["lower"] + 1) / k["lower"])
     rest = k["settle"] + k["hold"] - hold
     q_ref = np.concatenate([[s0], up, np.full(hold, g), down, np.full(rest, s0)])
     flag = np.zeros(q_ref.size)

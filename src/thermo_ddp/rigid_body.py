@@ -78,6 +78,15 @@ class RigidBodyDynamics:
             ss.append(ca.DM(np.concatenate([np.zeros(3), self._axes[i - 1]])))
         return xs, ss
 
+    def placements(self, q) -> tuple[list, list]:
+        """Rotation and position of every joint frame in the base frame (index 0: the base)."""
+        rot, pos = [ca.SX.eye(3)], [ca.SX.zeros(3)]
+        for i in range(1, self.model.njoints):
+            place, parent = self.model.jointPlacements[i], self.model.parents[i]
+            pos.append(pos[parent] + rot[parent] @ ca.DM(place.translation))
+            rot.append(rot[parent] @ ca.DM(place.rotation) @ _rotation(self._axes[i - 1], q[i - 1]))
+        return rot, pos
+
     def rnea(self, q, v, a):
         """Inverse dynamics tau = M(q) a + C(q, v) v + g(q) (armature included)."""
         xs, ss = self._transforms(q)

@@ -46,7 +46,8 @@ from . import motor
 from ._config import require, settings_from_mapping
 from .actuated_arm import ActuatedArm, default_parameter_file, load_model
 from .arm import ELBOW, LEFT_ARM
-from .errors import InputError
+from .integrators import rk4
+from .lift import min_jerk
 from .ocp import Constraint, Cost, OptimalControlProblem
 from .parameters import JointParameters, load_parameters
 from .recordings import Recording, TopicMap, read_bag_joints
@@ -126,30 +127,14 @@ class WholeArmSettings:
 # --------------------------------------------------------------------------------------------
 # Named CasADi functions of the model (kinematics, statics, thermal-only steps)
 # --------------------------------------------------------------------------------------------
-_AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0), "JointModelRZ": (0.0, 0.0, 1.0)}
-
-
-def _rotation(axis, angle):
-    k = ca.DM([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return ca.DM.eye(3) + ca.sin(angle) * k + (1 - ca.cos(angle)) * (k @ k)
-
-
 def payload_point_function(model: ActuatedArm) -> ca.Function:
     """``payload_point(q_rad) -> point_m``: the payload's centre in the reduced model's base frame."""
     pm = model.arm.model
     q = ca.SX.sym("q_rad", pm.nq)
-    rot, pos = {0: ca.SX.eye(3)}, {0: ca.SX.zeros(3)}
-    for i in range(1, pm.njoints):
-        kind = pm.joints[i].shortname()
-        if kind not in _AXES:
-            raise InputError("payload_point", "joint", pm.names[i], f"type {kind} not supported (revolute x/y/z)")
-        place, parent = pm.jointPlacements[i], pm.parents[i]
-        pos[i] = pos[parent] + rot[parent] @ ca.DM(place.translation)
-        rot[i] = rot[parent] @ ca.DM(place.rotation) @ _rotation(_AXES[kind], q[i - 1])
+    rot, pos = RigidBodyDynamics(pm).placements(q)
     frame = pm.frames[pm.getFrameId(model.arm.payload_frame)]
-    parent = frame.parentJoint
     local = frame.placement.act(model.arm.payload_translation_m)
-    point = pos[parent] + rot[parent] @ ca.DM(local)
+    point = pos[frame.parentJoint] + rot[frame.parentJoint] @ ca.DM(local)
     return ca.Function("payload_point", [q], [point], ["q_rad"], ["point_m"])
 
 
@@ -184,18 +169,10 @@ def thermal_rhs_function(model: ActuatedArm) -> ca.Function:
                        ["temperatures_c", "current_a", "velocity_rad_s", "ambient_c"], ["dtemperatures_c_dt"])
 
 
-def _rk4(rhs, t, h, *args):
-    k1 = rhs(t, *args)
-    k2 = rhs(t + h / 2 * k1, *args)
-    k3 = rhs(t + h / 2 * k2, *args)
-    k4 = rhs(t + h * k3, *args)
-    return t + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-
 def thermal_step_function(rhs: ca.Function, dt_s: float) -> ca.Function:
     """``thermal_step(temperatures_c, current_a, velocity_rad_s, ambient_c) -> temperatures_next_c`` (RK4)."""
     args = [ca.SX.sym(rhs.name_in(k), rhs.size1_in(k)) for k in range(4)]
-    return ca.Function("thermal_step", args, [_rk4(rhs, args[0], dt_s, *args[1:])], rhs.name_in(),
+    return ca.Function("thermal_step", args, [rk4(rhs, args[0], dt_s, *args[1:])], rhs.name_in(),
                        ["temperatures_next_c"])
 
 
@@ -358,10 +335,6 @@ def optimal_posture(model: ActuatedArm, target_m, tolerance_m: float, limit_c: f
 # --------------------------------------------------------------------------------------------
 # The dynamic plan: hanging -> posture -> hold, by DDP
 # --------------------------------------------------------------------------------------------
-def _min_jerk(s):
-    return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
-
-
 @dataclasses.dataclass(frozen=True)
 class HoldProblem:
     """The transcribed move-and-hold: OCP + data. p per knot = [q_ref (n), tracking weight, hold flag, ambient]."""
@@ -432,7 +405,7 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
     problem = OptimalControlProblem(dyn, move + hold, costs, tcosts, cons, tcons, u_lb=-peak, u_ub=peak,
                                     name=f"whole_arm_{n}", dynamics_jacobians=dyn_jac)
     start = hanging_posture(model, s.range_margin_rad)
-    q_ref = np.vstack([start + np.outer(_min_jerk(np.arange(move + 1) / move), np.asarray(q_goal) - start),
+    q_ref = np.vstack([start + np.outer(min_jerk(np.arange(move + 1) / move), np.asarray(q_goal) - start),
                        np.tile(q_goal, (hold, 1))])
     flag = (np.arange(move + hold + 1) >= move).astype(float)
     params = np.column_stack([q_ref, np.full(move + hold + 1, s.tracking_weight), flag,
@@ -746,7 +719,7 @@ def estimate_winding(recording: Recording, params: JointParameters, limit_c: flo
     args = [ca.SX.sym(rhs.name_in(k), rhs.size1_in(k)) for k in range(4)]
     x = args[0]
     for _ in range(substeps):
-        x = _rk4(rhs, x, h / substeps, *args[1:])
+        x = rk4(rhs, x, h / substeps, *args[1:])
     step = ca.Function("joint_thermal_step", [*args, h], [x], [*rhs.name_in(), "dt_s"], ["temperatures_next_c"])
     velocity = recording.velocity if recording.velocity is not None else np.zeros(len(recording))
     ambient = recording.ambient_c
