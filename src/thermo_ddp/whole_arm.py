@@ -453,7 +453,7 @@ def solve_hold(hp: HoldProblem, settings: WholeArmSettings, warm_start: WarmStar
     not yet converged (the R(T) i^2 curvature of an active winding limit). Returns (result, summary).
 
     Full DDP from the cold guess fails on the 4-joint arm: the dynamics-tensor term makes the value
-    Hessians indefinite and Quu regularisation does not bound them (reported to the lead)."""
+    Hessians indefinite and Quu regularisation does not bound them."""
     stages, result = [], None
     warm = warm_start or initial_guess(hp)
     for full, iterations in ((False, settings.gauss_newton_iterations), (True, settings.max_iterations)):

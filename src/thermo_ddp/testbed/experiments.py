@@ -242,7 +242,7 @@ def _effects_name(params: PlantParameters) -> str:
 
 
 def random_sensors(rng: np.random.Generator) -> SensorSettings:
-    """Sensor quality drawn from the ranges of the team brief."""
+    """Sensor quality drawn from the ranges of issue 4 (noise 0.05-0.2 °C, quantum 0.1-0.5 °C, 0.2-2 Hz)."""
     return SensorSettings(sample_rate_hz=rng.uniform(0.2, 2.0), jitter_fraction=rng.uniform(0.0, 0.3),
                           temperature_noise_c=rng.uniform(0.05, 0.2),
                           temperature_quantum_c=float(rng.choice([0.1, 0.2, 0.25, 0.5])),

@@ -53,19 +53,19 @@ class PlantParameters:
     gear_ratio: float = 100.0  # Talos elbow, example-robot-data talos.srdf rotor_params gear_ratio
     torque_constant_nm_per_a: float = 0.1106  # motor side; report eq. 9 slope 11.06 N·m/A / 100
     rotor_inertia_kg_m2: float = 1e-5  # example-robot-data talos.srdf rotor_params "mass" (inertia)
-    viscous_friction_nm_s_per_rad: float = 0.3  # team brief nominal
+    viscous_friction_nm_s_per_rad: float = 0.3  # as models/arm_left_4_joint.toml (assumption)
     coulomb_friction_nm: float = 1.17  # report eq. 9 offset
     coulomb_smoothing_rad_s: float = 0.05
-    effort_offset_nm: float = 0.2  # small constant torque bias (sensor/cogging), team brief
+    effort_offset_nm: float = 0.2  # small constant torque bias (sensor/cogging), an assumption
     forearm_mass_kg: float = 1.1  # talos_left_arm.urdf arm_left_4_link mass 1.10216 kg
-    forearm_com_m: float = 0.15  # team brief nominal
+    forearm_com_m: float = 0.15  # assumption: forearm centre of mass about 0.15 m from the elbow axis
     forearm_inertia_kg_m2: float = 0.0024  # about its COM, urdf arm_left_4_link iyy
     gravity_m_s2: float = 9.81
     # electrical: R(T_w) = R_ref (1 + alpha (T_w - T_ref)), report eq. 3
-    resistance_ohm: float = 0.70  # team brief nominal, at resistance_ref_c
+    resistance_ohm: float = 0.70  # as models/arm_left_4_joint.toml, at resistance_ref_c
     resistance_ref_c: float = 25.0
     copper_alpha_per_k: float = 0.00393  # report eq. 3, copper
-    # thermal network (team brief nominal, same class as maxon flat BLDC datasheets)
+    # thermal network: the values of models/arm_left_4_joint.toml (see its [sources])
     winding_capacity_j_per_k: float = 40.0
     casing_capacity_j_per_k: float = 1200.0
     drive_capacity_j_per_k: float = 300.0
