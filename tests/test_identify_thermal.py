@@ -114,7 +114,7 @@ def test_simulation_on_an_irregular_grid_with_gaps_matches_the_testbed_truth():
     grid = thermal_grid(rec.to_recording(), ELBOW)
     model = ThermalModel(ELBOW, ("casing_node",))
     values = [getattr(plant, k) for k in model.keys]
-    temps, sensor, _ = model.simulate(grid, values, 0.0)
+    temps, sensor, *_ = model.simulate(grid, values, 0.0)
     assert np.max(np.abs(np.diff(grid.time_s))) > 25.0  # there is a gap
     np.testing.assert_allclose(sensor, rec.truth.casing_c, atol=0.03)
     # the fast winding node lags by up to one 3.3 s hold while the current ramps (zero-order hold)
@@ -129,16 +129,18 @@ def test_sensitivities_match_finite_differences():
     model = ThermalModel(ELBOW, ("drive_heating", "friction_heating", "copper_resistance"))
     values = np.array([{"friction_heating_fraction": 0.5, "copper_alpha_per_k": 0.004}.get(k, 0.0)
                        or ELBOW.thermal[k] for k in model.keys])
-    _, y0, jac = model.simulate(grid, values, 0.3)
+    _, _, jac, jac_winding = model.simulate(grid, values, 0.3)
     for j in range(len(values) + 1):
         step = 1e-4 * abs(values[j]) if j < len(values) else 1e-3
         up, down = values.copy(), values.copy()
         if j < len(values):
             up[j] += step
             down[j] -= step
-        y_up = model.simulate(grid, up, 0.3 + (step if j == len(values) else 0.0))[1]
-        y_down = model.simulate(grid, down, 0.3 - (step if j == len(values) else 0.0))[1]
-        np.testing.assert_allclose(jac[:, j], (y_up - y_down) / (2 * step), rtol=1e-4, atol=1e-7 * np.abs(jac[:, j]).max())
+        sim_up = model.simulate(grid, up, 0.3 + (step if j == len(values) else 0.0))
+        sim_down = model.simulate(grid, down, 0.3 - (step if j == len(values) else 0.0))
+        for analytic, fd in ((jac, (sim_up[1] - sim_down[1]) / (2 * step)),   # sensor (casing)
+                             (jac_winding, (sim_up[0][model.winding] - sim_down[0][model.winding]) / (2 * step))):
+            np.testing.assert_allclose(analytic[:, j], fd, rtol=1e-4, atol=1e-7 * np.abs(analytic[:, j]).max())
 
 
 @pytest.mark.parametrize("missing", ["current_a", "temperature_c"])
@@ -162,3 +164,35 @@ def test_csv_entry_point_returns_a_loadable_parameter_file(tmp_path):
     rec.to_csv(bad, columns=("time_s", "current_a"))
     with pytest.raises(InputError, match="temperature_c"):
         identify_thermal_files([bad])
+
+
+def test_voltage_thermometry_pins_the_winding_node_down():
+    """Known parameters (two-node plant, nothing concealed): with the motor voltage as a winding
+    thermometer the winding capacity and resistance come out closer to the truth and with smaller
+    standard errors than from the casing sensor alone; a one-node model ignores the voltage."""
+    from thermo_ddp.testbed import LOGGED_COLUMNS, winding_pulses
+    plant = PlantParameters(friction_heating=False, drive_heating=False)
+    recs = [static_4a(params=plant, heating_s=1800.0, cooling_s=1800.0, seed=21), winding_pulses(params=plant, seed=22)]
+    casing = identify_thermal([r.to_recording() for r in recs], "two_node")
+    both = identify_thermal([r.to_recording(LOGGED_COLUMNS) for r in recs], "two_node")
+    assert casing.success and both.success
+    for key, rel in (("winding_capacity_j_per_k", 0.06), ("winding_casing_k_per_w", 0.03)):
+        true = getattr(plant, key)
+        assert both.parameters[key] == pytest.approx(true, rel=rel)
+        assert abs(both.parameters[key] - true) <= 3 * both.stderr[key]
+        assert both.stderr[key] < 0.7 * casing.stderr[key]
+    assert "winding resistance thermometry from voltage_v" in both.fit_report()
+    one = identify_thermal([r.to_recording(LOGGED_COLUMNS) for r in recs], "one_node")
+    assert not any("thermometry" in n for n in one.notes)
+
+
+def test_thermometry_uses_only_loaded_and_still_samples():
+    from thermo_ddp.testbed import LOGGED_COLUMNS, biceps
+    rec = biceps(heating_s=600.0, cooling_s=600.0, seed=3).to_recording(LOGGED_COLUMNS)
+    grid = thermal_grid(rec, ELBOW)
+    used = grid.winding_weight > 0
+    assert 0 < used.sum() < 0.2 * len(grid)          # the curl moves: only the grasp and holds qualify
+    assert np.all(np.abs(grid.current_a[used]) >= 1.0) and np.all(np.abs(grid.velocity[used]) <= 0.05)
+    assert np.all(np.isnan(grid.winding_c[~used]))
+    off = thermal_grid(rec, ELBOW, ThermalSettings(voltage_thermometry=False))
+    assert off.winding_c is None and off.thermometry_samples == 0

@@ -103,10 +103,10 @@ def test_the_ekf_measures_the_winding_of_a_one_node_model(chain):
 
 def test_chain_writes_recordings_models_figures_and_table(chain):
     out, table = chain
-    for name in ("static_3a", "static_4a", "biceps"):
+    for name in ("static_3a", "static_4a", "biceps", "winding_pulses"):
         with (out / "recordings" / f"{name}.csv").open() as handle:
             header = next(csv.reader(handle))
-        assert header[0] == "time_s" and "temperature_c" in header and "winding_c" not in header
+        assert header[0] == "time_s" and {"temperature_c", "voltage_v"} <= set(header) and "winding_c" not in header
     original = load_parameters(out / "models" / f"{ELBOW}_original.toml")
     improved = load_parameters(out / "models" / f"{ELBOW}_improved.toml")
     assert original.thermal.model == "one_node" and original.thermal["friction_heating_fraction"] == 0.0
@@ -123,6 +123,17 @@ def test_diagnosis_finds_the_robots_concealed_physics(chain):
     assert robot.friction_heating and robot.drive_heating
     assert {"friction_heating", "drive_heating"} <= set(table["diagnosis"]["missing_physics"])
     assert table["diagnosis"]["rmse_after"] < 0.5 * table["diagnosis"]["rmse_before"]
+
+
+def test_the_improved_models_winding_node_is_close_to_the_robots(chain):
+    """Known parameters (the testbed's hidden ones): the full-rate refit with voltage thermometry puts the
+    winding node, which the casing sensor alone barely sees, near its true values."""
+    _, table = chain
+    vs = table["identified_vs_true"]
+    assert vs["winding_capacity_j_per_k"]["identified"] == pytest.approx(vs["winding_capacity_j_per_k"]["true"], rel=0.12)
+    assert vs["winding_casing_k_per_w"]["identified"] == pytest.approx(vs["winding_casing_k_per_w"]["true"], rel=0.04)
+    assert vs["casing_ambient_k_per_w"]["identified"] == pytest.approx(vs["casing_ambient_k_per_w"]["true"], rel=0.06)
+    assert any("thermometry" in n for n in table["improved_fit"]["notes"])
 
 
 def test_improved_model_plans_and_its_closed_loop_keeps_the_true_winding_under_the_limit(chain):
@@ -159,6 +170,8 @@ def test_with_the_true_parameters_the_same_controller_keeps_a_small_margin(chain
     impr, truth = (next(r for r in table["rows"] if r["model"] == m) for m in ("improved", "truth"))
     assert truth["closed_loop_status"] == "completed" and 0 <= truth["margin_c"] < 3.0
     assert truth["closed_loop_hold_s"] >= impr["closed_loop_hold_s"] and truth["margin_c"] <= impr["margin_c"]
+    # what the voltage-informed identification leaves on the table: a few kelvin and a fraction of the hold
+    assert impr["margin_c"] < 6.0 and impr["closed_loop_hold_s"] > 0.8 * truth["closed_loop_hold_s"]
     claim_ = table["claims"][0]
     assert claim_["oracle_hold_s"] == truth["closed_loop_hold_s"]
     assert claim_["improved_hold_share_of_oracle"] == pytest.approx(impr["closed_loop_hold_s"] / truth["closed_loop_hold_s"])

@@ -287,3 +287,32 @@ def test_bad_settings_are_input_errors():
         PlantParameters(casing_ambient_k_per_w=-1.0)
     with pytest.raises(InputError, match="current_a"):
         static_hold(0.01, payload_kg=20.0, heating_s=600.0)
+
+
+# ----------------------------------------------------------------------------- motor voltage
+def test_logged_voltage_is_the_resistance_law_of_the_true_winding(tmp_path):
+    """voltage_v = R_ref (1 + alpha (T_w - T_ref)) i + K_m N v, evaluated here from the hidden truth
+    (noiseless sensors), and it is written only when asked for."""
+    from thermo_ddp.testbed import LOGGED_COLUMNS, winding_pulses
+    p = PlantParameters()
+    rec = winding_pulses(params=p, pulses=1, cooling_s=600.0, sensors=SensorSettings().noiseless(), seed=1)
+    t, c = rec.truth, rec.columns
+    ohm = p.resistance_ohm * (1 + p.copper_alpha_per_k * (t.winding_c - p.resistance_ref_c))
+    want = ohm * t.current_a + p.torque_constant_nm_per_a * p.gear_ratio * c["velocity"]
+    np.testing.assert_allclose(c["voltage_v"], want, rtol=1e-12, atol=1e-12)
+    with rec.to_csv(tmp_path / "default.csv").open() as handle:
+        assert tuple(next(csv.reader(handle))) == COLUMNS
+    with rec.to_csv(tmp_path / "voltage.csv", LOGGED_COLUMNS).open() as handle:
+        assert tuple(next(csv.reader(handle))) == LOGGED_COLUMNS
+
+
+def test_winding_pulses_excite_the_winding_and_stay_under_the_cut_off():
+    from thermo_ddp.testbed import winding_pulses
+    rec = winding_pulses(seed=2)
+    t = rec.truth
+    start, end = t.phase("pulse_1")
+    during = (t.time_s > start + 2) & (t.time_s < end)
+    assert np.median(np.abs(t.current_a[during])) == pytest.approx(8.0, rel=0.05)
+    assert 60.0 < t.winding_c.max() < 84.0           # tens of kelvin above the casing, under the cut-off
+    assert t.winding_c.max() - t.casing_c.max() > 20.0
+    assert [name for name, *_ in t.phases].count("rest_3") == 1

@@ -41,11 +41,12 @@ from ._config import require, settings_from_mapping
 from .actuated_arm import ActuatedArm, default_parameter_file
 from .arm import ELBOW, ArmSettings
 from .diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
-from .identify.thermal import parameter_file
+from .identify.thermal import ThermalFit, identify_thermal, parameter_file
 from .lift import LiftPlan, LiftSettings, plan_lift
 from .mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from .parameters import JointParameters, load_parameters, parameters_from_dict, save_parameters
-from .testbed import Ambient, PlantParameters, SimulatedRecording, biceps, static_3a, static_4a
+from .testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
+                      static_4a, winding_pulses)
 from .thermal import HeatSource, ThermalNetwork, network_from_parameters
 
 log = logging.getLogger(__name__)
@@ -63,7 +64,13 @@ class LoopSettings:
     planner backs off ``backoff_c`` from the limit, ``horizon_knots`` knots of 0.1 s (None: the whole
     task, lift + hold + lower + settle; a shorter window cannot plan a hold that outlasts it, its
     terminal return constraint contradicts the hold band), sensor ``seed``. ``oracle``: also plan and
-    execute with the robot's true parameter file (the best any identified model can do)."""
+    execute with the robot's true parameter file (the best any identified model can do).
+
+    ``pulse_test``: also record :func:`~thermo_ddp.testbed.winding_pulses` (not in the report), which
+    excites the winding's time constant. ``voltage``: the robot logs its motor voltage; the
+    identification uses it as a winding thermometer and the improved model's observer measures it.
+    The original model is run as the report ran it: casing sensor only, the report's experiments
+    identify it all the same (one node: no winding apart from the sensor for the voltage to inform)."""
 
     payload_kg: float = 40.0
     limits_c: tuple[float, ...] = (84.0, 140.0)
@@ -74,6 +81,8 @@ class LoopSettings:
     horizon_knots: int | None = None
     seed: int = 0
     oracle: bool = True
+    pulse_test: bool = True
+    voltage: bool = True
     progress: bool | None = None
 
     def __post_init__(self):
@@ -106,11 +115,12 @@ def robot_parameters() -> PlantParameters:
 
 def record_experiments(robot: PlantParameters, settings: LoopSettings) -> tuple[SimulatedRecording, ...]:
     """The report's experiments (section 4.3) on the robot: static ~3 A, static ~4 A warm with a bump,
-    biceps curl."""
+    biceps curl; with ``settings.pulse_test`` also the winding pulse test."""
     h, c = settings.heating_s, settings.cooling_s
-    return (static_3a(params=robot, heating_s=h, cooling_s=c, loading_s=min(600.0, h / 6), seed=settings.seed),
-            static_4a(params=robot, heating_s=h, cooling_s=c, seed=settings.seed),
-            biceps(params=robot, heating_s=h / 2, cooling_s=c, seed=settings.seed))
+    report = (static_3a(params=robot, heating_s=h, cooling_s=c, loading_s=min(600.0, h / 6), seed=settings.seed),
+              static_4a(params=robot, heating_s=h, cooling_s=c, seed=settings.seed),
+              biceps(params=robot, heating_s=h / 2, cooling_s=c, seed=settings.seed))
+    return report + ((winding_pulses(params=robot, seed=settings.seed),) if settings.pulse_test else ())
 
 
 def truth_parameters(robot: PlantParameters, base: JointParameters | None = None,
@@ -162,14 +172,15 @@ def truth_model(robot: PlantParameters, payload_kg: float, base: JointParameters
 
 
 # ----------------------------------------------------------------------------- closed loop
-def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path) -> MPCSettings:
-    """The closed loop's settings (the project's MPC defaults otherwise: 0.1 s period, RK4, sensors)."""
+def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path, model: str = "improved") -> MPCSettings:
+    """The closed loop's settings (the project's MPC defaults otherwise: 0.1 s period, RK4, sensors);
+    the observer measures the motor voltage when ``settings.voltage``, except for the original model."""
     lift = LiftSettings()
     task_s = lift.lift_s + settings.hold_s + lift.lower_s + lift.settle_s
     knots = settings.horizon_knots or int(math.ceil(task_s / MPCSettings().control_period_s - 1e-9))
     return MPCSettings(payload_kg=settings.payload_kg, limit_c=limit_c, hold_s=settings.hold_s,
                        backoff_c=settings.backoff_c, horizon_knots=knots, seed=settings.seed,
-                       parameter_file=str(model_file))
+                       parameter_file=str(model_file), observe_voltage=settings.voltage and model != "original")
 
 
 def execute(model_file: Path, plant_model: ActuatedArm, settings: MPCSettings,
@@ -210,13 +221,15 @@ class Execution:
 
 @dataclasses.dataclass(frozen=True)
 class LoopResult:
-    """The chain's outcome: recordings, diagnosis, the two parameter files, every execution."""
+    """The chain's outcome: recordings, diagnosis, the improved model's fit, the parameter files, every
+    execution."""
 
     settings: LoopSettings
     robot: PlantParameters
     recordings: tuple[SimulatedRecording, ...]
     recording_files: tuple[Path, ...]
     diagnosis: ThermalDiagnosis
+    improved_fit: ThermalFit
     model_files: dict[str, Path]
     executions: tuple[Execution, ...]
 
@@ -259,8 +272,18 @@ class LoopResult:
                               "baseline_model": d["baseline"]["model"], "final_model": d["final"]["model"],
                               "rmse_before": d["validation"]["rmse_before"],
                               "rmse_after": d["validation"]["rmse_after"]},
+                "improved_fit": {"model": self.improved_fit.model, "parameters": dict(self.improved_fit.parameters),
+                                 "stderr": dict(self.improved_fit.stderr), "notes": list(self.improved_fit.notes)},
+                "identified_vs_true": self.identified_vs_true(),
                 "model_files": {k: str(v) for k, v in self.model_files.items()},
                 "rows": self.rows(), "claims": self.claims()}
+
+    def identified_vs_true(self) -> dict[str, dict[str, float | None]]:
+        """The improved model's thermal parameters next to the robot's hidden values (the testbed knows them)."""
+        truth = truth_parameters(self.robot).thermal.values
+        fit = self.improved_fit
+        return {k: {"identified": v, "stderr": fit.stderr.get(k), "true": truth.get(k)}
+                for k, v in fit.parameters.items() if k in truth}
 
     def table(self) -> str:
         head = (f"{self.settings.payload_kg:g} kg lift, requested hold {self.settings.hold_s:g} s; closed loop "
@@ -279,7 +302,15 @@ class LoopResult:
         return "\n".join([f"close the loop: {self.status}",
                           f"diagnosis: {d['baseline_model']} -> {d['final_model']}, missing physics "
                           f"{', '.join(d['missing_physics']) or 'none'}, held-out rmse {d['rmse_before']:.3f} -> "
-                          f"{d['rmse_after']:.3f} K", self.table(), *(c["statement"] for c in self.claims())])
+                          f"{d['rmse_after']:.3f} K", self.parameter_table(), self.table(),
+                          *(c["statement"] for c in self.claims())])
+
+    def parameter_table(self) -> str:
+        """The improved model's thermal parameters (± standard error) next to the robot's hidden values."""
+        rows = [f"  {k:28s} {v['identified']:10.4g} ± {v['stderr'] or 0:<8.2g} true {v['true']:.4g}"
+                for k, v in self.identified_vs_true().items()]
+        return "\n".join([f"improved model, re-identified at full rate ({self.improved_fit.model}) vs the robot's "
+                          "hidden values:", *rows])
 
     def plot(self, path: str | Path) -> Path:
         """Per limit: true and estimated winding, current, measured casing, for both models."""
@@ -392,19 +423,34 @@ def plot_summary(result: LoopResult, path: Path) -> Path:
     return path
 
 
-def identify_models(recording_files, out_dir: Path, settings: LoopSettings) -> tuple[ThermalDiagnosis, dict[str, Path]]:
-    """Diagnose the recordings; write the ORIGINAL (identified one-node baseline, constant ambient, no
-    friction heat) and IMPROVED (diagnosed) parameter files into ``out_dir``."""
+def identify_models(recording_files, out_dir: Path,
+                    settings: LoopSettings) -> tuple[ThermalDiagnosis, ThermalFit, dict[str, Path]]:
+    """Diagnose the recordings; re-identify the diagnosed structure on every sample (:func:`refit`);
+    write the ORIGINAL (identified one-node baseline, constant ambient, no friction heat) and IMPROVED
+    (the re-identified diagnosed structure) parameter files into ``out_dir``."""
     diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
     require(diagnosis.success, _SRC, "diagnosis", diagnosis.status, diagnosis.message)
+    improved = refit(diagnosis, recording_files)
     out_dir.mkdir(parents=True, exist_ok=True)
     original = parameter_file(diagnosis.params, diagnosis.baseline_fit, diagnosis.recordings)
     require(original["thermal"]["model"] == "one_node", _SRC, "baseline", original["thermal"]["model"],
             "expected the report's one-node baseline")
     files = {"original": out_dir / f"{ELBOW}_original.toml", "improved": out_dir / f"{ELBOW}_improved.toml"}
-    for name, data in (("original", original), ("improved", diagnosis.to_dict()["parameter_file"])):
+    for name, data in (("original", original), ("improved", parameter_file(diagnosis.params, improved, improved.recordings))):
         save_parameters(parameters_from_dict(data, name), files[name])
-    return diagnosis, files
+    return diagnosis, improved, files
+
+
+def refit(diagnosis: ThermalDiagnosis, recording_files) -> ThermalFit:
+    """The diagnosed structure fitted again on every sample, from the diagnosis' values. The diagnosis
+    compares its candidates on a 10 s grid (many cross-validation fits); the winding's ~36 s time
+    constant and the voltage thermometry (one reading per sample) want the recordings' full rate."""
+    final = diagnosis.final_fit
+    fit = identify_thermal(list(recording_files), terms=final.terms, parameters=diagnosis.params,
+                           start=final.parameters)
+    require(fit.success, _SRC, "refit", fit.status, fit.message)
+    log.info("refit at full rate (%s): %s", fit.model, ", ".join(f"{k} {v:.4g}" for k, v in fit.parameters.items()))
+    return fit
 
 
 def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = None, **options) -> LoopResult:
@@ -420,8 +466,9 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
     recordings = record_experiments(robot, settings)
-    files = tuple(r.to_csv(out_dir / "recordings" / f"{r.name}.csv") for r in recordings)
-    diagnosis, model_files = identify_models(files, out_dir / "models", settings)
+    columns = LOGGED_COLUMNS if settings.voltage else COLUMNS
+    files = tuple(r.to_csv(out_dir / "recordings" / f"{r.name}.csv", columns) for r in recordings)
+    diagnosis, improved_fit, model_files = identify_models(files, out_dir / "models", settings)
     save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
     plant_model = truth_model(robot, settings.payload_kg)
     executions = []
@@ -431,11 +478,11 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     show = bool(settings.progress)
     for model, lim in tqdm(cases, desc="plan and execute", unit="case", disable=not show):
         plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_files[model]))
-        run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model]), show)
+        run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model], model), show)
         log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
                  run.achieved_hold_s, run.margin_c)
         executions.append(Execution(model, lim, plan, run))
-    return LoopResult(settings, robot, recordings, files, diagnosis, model_files, tuple(executions))
+    return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
 
 
 def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[str, Any]:
@@ -457,5 +504,5 @@ def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[s
 
 
 __all__ = ["Execution", "LoopResult", "LoopSettings", "claim", "execute",
-           "identify_models", "loop_files", "record_experiments", "robot_parameters", "run_loop", "truth_model",
+           "identify_models", "loop_files", "record_experiments", "refit", "robot_parameters", "run_loop", "truth_model",
            "truth_network", "truth_parameters"]

@@ -23,6 +23,11 @@ inputs; each (sub-)step is the trapezoidal rule (A-stable, 2nd order) solved exa
 system.  Sensitivities d(temperature)/d(parameters) are propagated with the states (forward
 sensitivities of the step, CasADi AD, one ``mapaccum`` per recording), not by finite differences.
 
+A second measurement when the recording logs ``voltage_v``: resistance thermometry of the winding
+(R(T) = (V - K_b N v) / i at standstill, report eqs. 2-4), weighed by its noise at each sample's current
+(see :class:`ThermalSettings`). It informs the winding node, which a casing sensor barely sees; a
+one-node model has no winding apart from its sensor and ignores it.
+
 Initial state per recording: the network's equilibrium under the first held inputs, plus a fitted
 offset common to all nodes (``initial_offset_c``): the sensor's initial temperature is fitted, the
 unmeasured nodes start in the same relation to it as at equilibrium.
@@ -110,6 +115,13 @@ class ThermalSettings:
     ``chi2_tolerance``: the optimiser stops when an iteration lowers the residual sum of squares by
     less than this many residual variances (a change of chi^2 far below 1 is statistically void;
     flat valleys of poorly identifiable parameters are not crawled along).
+
+    Resistance thermometry (``voltage_thermometry``, used when a recording has ``voltage_v`` and the
+    structure has a winding node apart from the sensor): at samples with |i| >= ``thermometry_min_current_a``
+    and |v| <= ``thermometry_max_velocity_rad_s`` (the back-EMF is small there), the winding temperature
+    T_w = T_ref + ((V - K_b N v) / (R_ref i) - 1) / alpha (report eqs. 2-4) is a second measurement.
+    Its standard deviation is ``thermometry_noise_v`` / (R_ref alpha |i|) (voltage, current and velocity
+    noise together, in volts); its rows are weighed against the sensor's ``sensor_noise_c``.
     """
 
     min_step_s: float = 0.0
@@ -119,6 +131,11 @@ class ThermalSettings:
     head_s: float = 30.0
     max_nfev: int = 200
     chi2_tolerance: float = 0.05
+    voltage_thermometry: bool = True
+    thermometry_noise_v: float = 0.08
+    thermometry_min_current_a: float = 1.0
+    thermometry_max_velocity_rad_s: float = 0.05
+    sensor_noise_c: float = 0.1
 
     def __post_init__(self) -> None:
         src = "thermal settings"
@@ -129,6 +146,9 @@ class ThermalSettings:
         require(self.gap_window_s > 0, src, "gap_window_s", self.gap_window_s, "must be > 0")
         require(self.max_nfev >= 1, src, "max_nfev", self.max_nfev, "must be >= 1")
         require(0 < self.chi2_tolerance <= 1, src, "chi2_tolerance", self.chi2_tolerance, "must be in (0, 1]")
+        for name in ("thermometry_noise_v", "thermometry_min_current_a", "thermometry_max_velocity_rad_s",
+                     "sensor_noise_c"):
+            require(getattr(self, name) > 0, src, name, getattr(self, name), "must be > 0")
 
 
 # ----------------------------------------------------------------------------- structure
@@ -223,6 +243,7 @@ class ThermalModel:
         self.network = network
         self.nodes = network.nodes
         self.sensor = network.index(network.sensor_node)
+        self.winding = network.index("winding")
         m = SimpleNamespace(**dataclasses.asdict(params.motor))
         if "copper_alpha_per_k" in sym:
             m.copper_alpha_per_k = sym["copper_alpha_per_k"]
@@ -258,17 +279,22 @@ class ThermalModel:
             self._maps[steps] = self.step.mapaccum("thermal_simulation", steps)
         return self._maps[steps]
 
-    def simulate(self, grid: "ThermalGrid", values: Sequence[float], offset_c: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    @property
+    def thermometry(self) -> bool:
+        """Whether resistance thermometry can inform this structure (a winding node apart from the sensor)."""
+        return self.winding != self.sensor
+
+    def simulate(self, grid: "ThermalGrid", values: Sequence[float],
+                 offset_c: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(node temperatures at the grid's kept samples (nodes x K), sensor output (K,),
-        d sensor / d[parameters, offset] (K x (p + 1)))."""
+        d sensor / d[parameters, offset] and d winding / d[parameters, offset] (K x (p + 1)))."""
         n, q = len(self.nodes), len(self.keys) + 1
         p = np.asarray(values, float)
         z0 = np.asarray(self.initial(grid.inputs[:, 0], p, offset_c)).ravel()
         z = np.asarray(self._mapped(grid.inputs.shape[1])(z0, grid.inputs, p))
         z = np.column_stack([z0, z[:, grid.output_index]])
         temps = z[:n]
-        jac = z[n + self.sensor::n][:q].T
-        return temps, temps[self.sensor], jac
+        return temps, temps[self.sensor], z[n + self.sensor::n][:q].T, z[n + self.winding::n][:q].T
 
     def equilibrium_sensor(self, grid: "ThermalGrid", values: Sequence[float]) -> float:
         return float(self.equilibrium(grid.inputs[:, 0], np.asarray(values, float))[self.sensor])
@@ -288,6 +314,12 @@ class ThermalGrid:
     output_index: np.ndarray    # sub-step after which kept sample k+1 is reached (K-1,)
     has_velocity: bool
     has_ambient: bool
+    winding_c: np.ndarray | None = None       # resistance thermometry at the kept samples (NaN: unusable)
+    winding_weight: np.ndarray | None = None  # sensor_noise_c / its standard deviation (0: unusable)
+
+    @property
+    def thermometry_samples(self) -> int:
+        return 0 if self.winding_weight is None else int(np.count_nonzero(self.winding_weight))
 
     def __len__(self) -> int:
         return int(self.time_s.size)
@@ -322,8 +354,25 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     held = (cum[:, keep[1:]] - cum[:, keep[:-1]]) / span
     substeps = np.maximum(np.ceil(span / settings.max_step_s - 1e-9).astype(int), 1)
     inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
+    thermometry = _thermometry(rec, params, settings, v, keep) if settings.voltage_thermometry else (None, None)
     return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
-                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None)
+                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry)
+
+
+def _thermometry(rec: Recording, params: JointParameters, settings: "ThermalSettings", velocity: np.ndarray,
+                 keep: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Winding temperature from the motor voltage and its weight (see :class:`ThermalSettings`)."""
+    if rec.voltage_v is None:
+        return None, None
+    m = params.motor
+    i, v = np.asarray(rec.current_a, float)[keep], velocity[keep]
+    usable = (np.abs(i) >= settings.thermometry_min_current_a) & (np.abs(v) <= settings.thermometry_max_velocity_rad_s)
+    i_safe = np.where(usable, i, 1.0)
+    emf = m.back_emf_v_s_per_rad * m.gear_ratio * v
+    ohm = (np.asarray(rec.voltage_v, float)[keep] - emf) / (m.resistance_ohm * i_safe)
+    winding = np.where(usable, m.resistance_ref_c + (ohm - 1.0) / m.copper_alpha_per_k, np.nan)
+    sigma = settings.thermometry_noise_v / (m.resistance_ohm * m.copper_alpha_per_k * np.abs(i_safe))
+    return winding, np.where(usable, settings.sensor_noise_c / sigma, 0.0)
 
 
 def _bridge_gaps(t: np.ndarray, features: np.ndarray, settings: "ThermalSettings") -> np.ndarray:
@@ -456,16 +505,14 @@ class _Problem:
             return self._last[1]
         values, dvalue = _from_theta(self.model.keys, theta[:self.p])
         offsets = theta[self.p:] * _OFFSET_SCALE_C
-        res, jac = [], np.zeros((sum(len(g) for g in self.grids), theta.size))
-        row = 0
+        res, jacs = [], []
         for r, (grid, w) in enumerate(zip(self.grids, self.weights)):
-            _, y, j = self.model.simulate(grid, values, offsets[r])
-            k = len(grid)
-            res.append(w * (y - grid.measured_c))
-            jac[row:row + k, :self.p] = w[:, None] * j[:, :self.p] * dvalue
-            jac[row:row + k, self.p + r] = w * j[:, self.p] * _OFFSET_SCALE_C
-            row += k
-        r_all = np.concatenate(res)
+            rows, j = _weighted_rows(self.model, grid, self.model.simulate(grid, values, offsets[r]), w)
+            res.append(rows)
+            block = np.zeros((rows.size, theta.size))
+            block[:, :self.p], block[:, self.p + r] = j[:, :self.p] * dvalue, j[:, self.p] * _OFFSET_SCALE_C
+            jacs.append(block)
+        r_all, jac = np.concatenate(res), np.vstack(jacs)
         if not np.all(np.abs(r_all) < 1e6):  # runaway or overflow: tell the optimiser the step failed
             r_all = np.full_like(r_all, np.inf)
         self.nfev += 1
@@ -477,6 +524,19 @@ class _Problem:
 
     def jac(self, theta):
         return self.evaluate(theta)[1]
+
+
+def _weighted_rows(model: ThermalModel, grid: ThermalGrid, sim: tuple, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted residual rows (model - measurement) of one recording and their Jacobian by
+    [parameters, offset]: the sensor's, then the winding thermometry's (when usable)."""
+    _, y, j_sensor, j_winding = sim
+    res, jac = [w * (y - grid.measured_c)], [w[:, None] * j_sensor]
+    if model.thermometry and grid.thermometry_samples:
+        use = (grid.winding_weight > 0) & (w > 0)
+        ww = w[use] * grid.winding_weight[use]
+        res.append(ww * (sim[0][model.winding][use] - grid.winding_c[use]))
+        jac.append(ww[:, None] * j_winding[use])
+    return np.concatenate(res), np.vstack(jac)
 
 
 def head_offset(model: ThermalModel, grid: ThermalGrid, values: Sequence[float], head_s: float) -> float:
@@ -550,19 +610,20 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
     residuals = measured - fitted
     w = np.concatenate(weights)
     used = w > 0
-    jac = np.zeros((residuals.size, p + len(grids)))
-    row = 0
-    for r, (g, s) in enumerate(zip(grids, sims)):
-        jac[row:row + len(g), :p] = s[2][:, :p]
-        jac[row:row + len(g), p + r] = s[2][:, p]
-        row += len(g)
+    rows, jacs = [], []
+    for r, (g, s, w_r) in enumerate(zip(grids, sims, weights)):
+        res_r, j_r = _weighted_rows(model, g, s, w_r)
+        keep = np.concatenate([w_r > 0, np.ones(res_r.size - len(g), bool)])
+        block = np.zeros((int(keep.sum()), p + len(grids)))
+        block[:, :p], block[:, p + r] = j_r[keep, :p], j_r[keep, p]
+        rows.append(res_r[keep])
+        jacs.append(block)
     names = list(keys) + [f"initial_offset_c[{g.name}]" for g in grids]
     seen_cols = [True] * p + [bool(np.any(w_r)) for w_r in weights]
     names = [n for n, s in zip(names, seen_cols) if s]
-    jac_used = jac[used][:, seen_cols]
     full_values = np.concatenate([values, offsets])[seen_cols]
-    base = result_from_jacobian(model.name, names, full_values, w[used] * residuals[used],
-                                w[used, None] * jac_used, fitted=fitted[used], units=UNITS)
+    base = result_from_jacobian(model.name, names, full_values, np.concatenate(rows),
+                                np.vstack(jacs)[:, seen_cols], fitted=fitted[used], units=UNITS)
     parameters = {k: float(v) for k, v in zip(keys, values)} | model.fixed
     inflation = math.sqrt(max(integrated_autocorrelation(r_g[w_g > 0]) for r_g, w_g in
                               zip(np.split(residuals, np.cumsum([len(g) for g in grids])[:-1]), weights)
@@ -577,6 +638,7 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
     if model.fixed:
         notes += ("held at the parameter file's values (not identifiable from the casing sensor alone): "
                   + ", ".join(model.fixed),)
+    notes += _thermometry_notes(model, grids, sims)
     return ThermalFit(model.name, parameters, stderr, residuals, fitted, ok, status, str(message),
                       np.concatenate([g.time_s for g in grids]), {k: UNITS[k] for k in keys}, notes,
                       terms=model.terms, recordings=tuple(g.name for g in grids),
@@ -584,6 +646,18 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
                       initial_offset_c={g.name: float(o) for g, o in zip(grids, offsets)},
                       stderr_inflation=inflation, nodes=model.nodes,
                       node_temperatures_c=tuple(s[0] for s in sims), nfev=nfev)
+
+
+def _thermometry_notes(model: ThermalModel, grids, sims) -> tuple[str, ...]:
+    """How the winding thermometry (if any) entered the fit and how well the winding follows it."""
+    counts = [g.thermometry_samples for g in grids]
+    if not model.thermometry or not sum(counts):
+        return ()
+    err = np.concatenate([(s[0][model.winding] - g.winding_c)[g.winding_weight > 0]
+                          for g, s in zip(grids, sims) if g.thermometry_samples])
+    return (f"winding resistance thermometry from voltage_v: {sum(counts)} samples "
+            f"({', '.join(f'{g.name} {c}' for g, c in zip(grids, counts))}); model winding minus thermometry "
+            f"mean {err.mean():+.2f} K, rms {math.sqrt(float(np.mean(err ** 2))):.2f} K",)
 
 
 # ----------------------------------------------------------------------------- public API

@@ -21,11 +21,12 @@ import numpy as np
 from .._config import require
 from ..recordings import Recording
 from .physics import (EFFECTS, Ambient, Phase, PlantParameters, PlantSolution, Profile, constant, curl,
-                      gaussian_pulses, hold, min_jerk, phase_mechanics, simulate, staircase)
+                      gaussian_pulses, hold, min_jerk, motor_voltage_v, phase_mechanics, simulate, staircase)
 from .sensors import Sampling, SensorSettings, measure, sample_times
 
 JOINT = "arm_left_4_joint"
 COLUMNS = ("time_s", "current_a", "temperature_c", "position", "velocity", "effort", "ambient_c")
+LOGGED_COLUMNS = COLUMNS + ("voltage_v",)  # the motor voltage is logged too; COLUMNS is the report's set
 EXPERIMENTS = ("static_3a", "static_4a", "biceps")
 HORIZONTAL_RAD = math.pi / 2
 UNLOAD_S, LOWER_S = 20.0, 20.0
@@ -79,9 +80,10 @@ class SimulatedRecording:
         return self.columns["time_s"]
 
     def to_csv(self, path: str | Path, columns: tuple[str, ...] = COLUMNS) -> Path:
-        """Write the contract CSV (header row, one sample per row); ``columns`` picks a subset."""
-        require(columns[:1] == ("time_s",) and set(columns) <= set(COLUMNS), "to_csv", "columns", columns,
-                f"must start with time_s and be among {COLUMNS}")
+        """Write the contract CSV (header row, one sample per row); ``columns`` picks a subset of
+        :data:`LOGGED_COLUMNS` (default: the report's channels, no motor voltage)."""
+        require(columns[:1] == ("time_s",) and set(columns) <= set(LOGGED_COLUMNS), "to_csv", "columns", columns,
+                f"must start with time_s and be among {LOGGED_COLUMNS}")
         path = Path(path)
         table = np.column_stack([self.columns[c] for c in columns])
         with path.open("w", newline="") as handle:
@@ -90,10 +92,10 @@ class SimulatedRecording:
             writer.writerows([[repr(float(v)) for v in row] for row in table])
         return path
 
-    def to_recording(self) -> Recording:
-        """The same data as a validated :class:`thermo_ddp.recordings.Recording`."""
+    def to_recording(self, columns: tuple[str, ...] = COLUMNS) -> Recording:
+        """The same data (``columns``, as :meth:`to_csv`) as a validated :class:`thermo_ddp.recordings.Recording`."""
         return Recording(name=self.name, joint=JOINT, source=f"testbed:{self.name}",
-                         **{c: self.columns[c] for c in COLUMNS})
+                         **{c: self.columns[c] for c in columns})
 
 
 # ----------------------------------------------------------------------------- experiments
@@ -181,6 +183,30 @@ def biceps(*, heating_s: float = 3600.0, cooling_s: float = 5400.0, idle_s: floa
     details = {"current_rms_a": current_rms_a, "payload_kg": payload, "lever_m": lever_m,
                "center_rad": center_rad, "amplitude_rad": amplitude_rad, "period_s": period_s, "cycles": cycles}
     return _record("biceps", Profile(tuple(phases)), params, ambient, sensors, sample_rate_hz, rng, seed, start, details)
+
+
+def winding_pulses(*, current_a: float = 8.0, pulse_s: float = 30.0, rest_s: float = 150.0, pulses: int = 3,
+                   idle_s: float = 120.0, cooling_s: float = 600.0, payload_kg: float = 30.0,
+                   angle_rad: float = HORIZONTAL_RAD, sample_rate_hz: float | None = None, seed: int = 0,
+                   params: PlantParameters | None = None, sensors: SensorSettings | None = None,
+                   ambient: Ambient | None = None, start: str = "idle") -> SimulatedRecording:
+    """Not in the report: ``pulses`` steps of ``current_a`` for ``pulse_s`` (the weight hung on and taken
+    off), ``rest_s`` apart. The report's hour-long holds barely excite the winding's time constant
+    (C_w R_wc ~ 36 s); these steps do, and with the motor voltage logged they pin C_w and R_wc down.
+    The defaults keep the true winding near 70 °C, under the 84 °C cut-off."""
+    params = params or PlantParameters()
+    rng = np.random.default_rng(seed)
+    require(isinstance(pulses, int) and pulses >= 1, "winding_pulses", "pulses", pulses, "expected an integer >= 1")
+    lever = hold_lever_m(params, current_a, payload_kg, angle_rad)
+    phases = [Phase("idle", "idle", idle_s, hold(angle_rad))] if idle_s > 0 else []
+    for k in range(pulses):
+        phases += [Phase(f"pulse_{k + 1}", "static", pulse_s, hold(angle_rad), constant(payload_kg), constant(lever)),
+                   Phase(f"rest_{k + 1}", "static", rest_s, hold(angle_rad))]
+    phases += _unload_and_cool(angle_rad, 0.0, lever, cooling_s)
+    details = {"current_a": current_a, "payload_kg": payload_kg, "lever_m": lever, "angle_rad": angle_rad,
+               "pulse_s": pulse_s, "rest_s": rest_s, "pulses": pulses}
+    return _record("winding_pulses", Profile(tuple(phases)), params, ambient, sensors, sample_rate_hz, rng, seed,
+                   start, details)
 
 
 def random_recording(seed: int, effects: str = "random", experiment: str = "random",
@@ -301,7 +327,9 @@ def _bricks(rng: np.random.Generator, payload_kg: float, loading_s: float):
 
 def _touches(rng: np.random.Generator, heating_s: float, per_hour: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centers, amplitudes [N·m] and widths [s] of people touching the arm."""
-    count = rng.poisson(per_hour * heating_s / 3600.0) if heating_s > 120 else 0
+    if heating_s <= 120:  # too short for a touch away from the phase's ends
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    count = rng.poisson(per_hour * heating_s / 3600.0)
     centers = rng.uniform(60.0, heating_s - 60.0, count)
     amplitudes = rng.choice([-1.0, 1.0], count) * rng.uniform(3.0, 12.0, count)
     return centers, amplitudes, rng.uniform(0.5, 3.0, count)
@@ -336,9 +364,10 @@ def _record(name: str, profile: Profile, params: PlantParameters, ambient: Ambie
     temps, mech, flows = solution.temperatures(t), profile.mechanics(params, t), solution.heat_flows(t)
     room = ambient(t)
     true = {"current_a": mech.current_a, "temperature_c": temps[1], "position": mech.q_rad,
-            "velocity": mech.v_rad_s, "effort": mech.effort_nm, "ambient_c": room}
+            "velocity": mech.v_rad_s, "effort": mech.effort_nm, "ambient_c": room,
+            "voltage_v": motor_voltage_v(params, mech.current_a, temps[0], mech.v_rad_s)}
     columns = {"time_s": t} | measure(true, sensors, rng)
     truth = Truth(name, seed, params, ambient, sensors, profile.phase_table(), details, sampling, t,
                   temps[0], temps[1], temps[2] if params.drive_heating else None, room, mech.current_a,
                   mech.effort_nm, flows.friction_w, flows.joule_w, solution)
-    return SimulatedRecording(name, {c: columns[c] for c in COLUMNS}, truth)
+    return SimulatedRecording(name, {c: columns[c] for c in LOGGED_COLUMNS}, truth)

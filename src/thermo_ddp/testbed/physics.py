@@ -261,6 +261,14 @@ def phase_mechanics(params: PlantParameters, phase: Phase, local_t: np.ndarray) 
     return Mechanics(q, dq, ddq, on * gravity, on * effort, on * friction, current, on * np.abs(friction * dq))
 
 
+def motor_voltage_v(params: PlantParameters, current_a: np.ndarray, winding_c: np.ndarray,
+                    velocity_rad_s: np.ndarray) -> np.ndarray:
+    """Motor terminal voltage R(T_w) i + K_b N v (report eqs. 2-4; K_b = K_m in SI units)."""
+    p = params
+    resistance = p.resistance_ohm * (1 + p.copper_alpha_per_k * (winding_c - p.resistance_ref_c))
+    return resistance * current_a + p.torque_constant_nm_per_a * p.gear_ratio * velocity_rad_s
+
+
 @dataclass(frozen=True)
 class Profile:
     """The experiment as a sequence of phases starting at t = 0."""

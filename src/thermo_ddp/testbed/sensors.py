@@ -11,7 +11,7 @@ from .._config import require
 
 TIME_RESOLUTION_S = 1e-3  # time stamps are rounded to the millisecond
 NOISE_FIELDS = ("temperature_noise_c", "temperature_quantum_c", "current_noise_a", "position_noise_rad",
-                "velocity_noise_rad_s", "effort_noise_nm", "ambient_noise_c", "ambient_quantum_c")
+                "velocity_noise_rad_s", "effort_noise_nm", "ambient_noise_c", "ambient_quantum_c", "voltage_noise_v")
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,7 @@ class SensorSettings:
     effort_noise_nm: float = 0.2
     ambient_noise_c: float = 0.05
     ambient_quantum_c: float = 0.1
+    voltage_noise_v: float = 0.05  # assumption: drive's voltage estimate, ~0.1 % of a 48 V bus (no dead-time error)
     gap_count: int = 0
     gap_duration_s: tuple[float, float] = (30.0, 300.0)
     dropout_probability: float = 0.0
@@ -120,4 +121,5 @@ def measure(truth: dict[str, np.ndarray], settings: SensorSettings, rng: np.rand
         "velocity": noisy("velocity", settings.velocity_noise_rad_s),
         "effort": noisy("effort", settings.effort_noise_nm),
         "ambient_c": quantise(noisy("ambient_c", settings.ambient_noise_c), settings.ambient_quantum_c),
+        "voltage_v": noisy("voltage_v", settings.voltage_noise_v),
     }
