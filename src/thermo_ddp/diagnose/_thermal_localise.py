@@ -27,7 +27,8 @@ import numpy as np
 from scipy import stats
 
 from .._config import require
-from ..identify.thermal import ThermalGrid, integrated_autocorrelation
+from ..identify.thermal import integrated_autocorrelation
+from ..identify.thermal_data import ThermalGrid
 from .localise import Localisation, Mismatch, RegimeTest, ResidualSeries, robust_scale
 
 THERMAL_REGIMES = ("heating", "cooling", "idle", "moving", "static")

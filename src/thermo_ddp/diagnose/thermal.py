@@ -40,9 +40,10 @@ from tqdm.auto import tqdm
 
 from .._config import require
 from ..errors import InputError
-from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, ThermalFit, ThermalGrid, ThermalModel,
-                                ThermalSettings, as_recordings, default_fixed, fit_grids, load_joint_parameters,
-                                network_model, parameter_file, start_values, thermal_grid)
+from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, ThermalFit, ThermalModel, as_recordings,
+                                default_fixed, fit_grids, load_joint_parameters, network_model, parameter_file,
+                                start_values)
+from ..identify.thermal_data import ThermalGrid, ThermalSettings, thermal_grid
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
                                 thermal_regimes)
 from .localise import Localisation, ResidualSeries

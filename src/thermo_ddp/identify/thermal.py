@@ -57,6 +57,7 @@ from ..parameters import JointParameters, ThermalParameters, load_parameters, pa
 from ..recordings import Recording, read_recording
 from ..thermal import HeatSource, network_from_parameters
 from .fit_report import Z95, FitResult, result_from_jacobian
+from .thermal_data import ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
 
@@ -100,55 +101,6 @@ _FALLBACK = {"winding_capacity_j_per_k": 40.0, "casing_capacity_j_per_k": 1200.0
              "friction_heating_fraction": 0.5, IRON_KEY: 0.02}
 _STATUS = {-1: "improper_input", 0: "max_iterations", 1: "converged_gtol", 2: "converged_ftol",
            3: "converged_xtol", 4: "converged_ftol_xtol"}
-
-
-@dataclasses.dataclass(frozen=True)
-class ThermalSettings:
-    """Grid and optimiser settings.
-
-    ``min_step_s``: merge samples closer than this (0: every sample is a grid point);
-    ``max_step_s``: longest integration sub-step (gaps are cut into sub-steps);
-    ``gap_factor``, ``gap_window_s``: an interval longer than ``gap_factor`` median sample steps is a
-    gap; the losses held over it are the mean over ``gap_window_s`` on both sides;
-    ``head_s``: span at the start of a recording whose median sets the initial offset of a
-    recording the fit does not see (cross-validation); ``max_nfev``: optimiser evaluations;
-    ``chi2_tolerance``: the optimiser stops when an iteration lowers the residual sum of squares by
-    less than this many residual variances (a change of chi^2 far below 1 is statistically void;
-    flat valleys of poorly identifiable parameters are not crawled along).
-
-    Resistance thermometry (``voltage_thermometry``, used when a recording has ``voltage_v`` and the
-    structure has a winding node apart from the sensor): at samples with |i| >= ``thermometry_min_current_a``
-    and |v| <= ``thermometry_max_velocity_rad_s`` (the back-EMF is small there), the winding temperature
-    T_w = T_ref + ((V - K_b N v) / (R_ref i) - 1) / alpha (report eqs. 2-4) is a second measurement.
-    Its standard deviation is ``thermometry_noise_v`` / (R_ref alpha |i|) (voltage, current and velocity
-    noise together, in volts); its rows are weighed against the sensor's ``sensor_noise_c``.
-    """
-
-    min_step_s: float = 0.0
-    max_step_s: float = 2.0
-    gap_factor: float = 4.0
-    gap_window_s: float = 60.0
-    head_s: float = 30.0
-    max_nfev: int = 200
-    chi2_tolerance: float = 0.05
-    voltage_thermometry: bool = True
-    thermometry_noise_v: float = 0.08
-    thermometry_min_current_a: float = 1.0
-    thermometry_max_velocity_rad_s: float = 0.05
-    sensor_noise_c: float = 0.1
-
-    def __post_init__(self) -> None:
-        src = "thermal settings"
-        require(self.min_step_s >= 0, src, "min_step_s", self.min_step_s, "must be >= 0")
-        require(self.max_step_s > 0, src, "max_step_s", self.max_step_s, "must be > 0")
-        require(self.head_s >= 0, src, "head_s", self.head_s, "must be >= 0")
-        require(self.gap_factor > 1, src, "gap_factor", self.gap_factor, "must be > 1")
-        require(self.gap_window_s > 0, src, "gap_window_s", self.gap_window_s, "must be > 0")
-        require(self.max_nfev >= 1, src, "max_nfev", self.max_nfev, "must be >= 1")
-        require(0 < self.chi2_tolerance <= 1, src, "chi2_tolerance", self.chi2_tolerance, "must be in (0, 1]")
-        for name in ("thermometry_noise_v", "thermometry_min_current_a", "thermometry_max_velocity_rad_s",
-                     "sensor_noise_c"):
-            require(getattr(self, name) > 0, src, name, getattr(self, name), "must be > 0")
 
 
 # ----------------------------------------------------------------------------- structure
@@ -298,111 +250,6 @@ class ThermalModel:
 
     def equilibrium_sensor(self, grid: "ThermalGrid", values: Sequence[float]) -> float:
         return float(self.equilibrium(grid.inputs[:, 0], np.asarray(values, float))[self.sensor])
-
-
-# ----------------------------------------------------------------------------- data
-@dataclasses.dataclass(frozen=True)
-class ThermalGrid:
-    """A recording on its integration grid: kept samples and the held inputs of every sub-step."""
-
-    name: str
-    time_s: np.ndarray          # kept sample times (K,)
-    measured_c: np.ndarray      # measured sensor temperature at the kept samples (K,)
-    current_a: np.ndarray       # at the kept samples (for regimes and plots)
-    velocity: np.ndarray        # at the kept samples (zeros when the recording has none)
-    inputs: np.ndarray          # (5, S): step_s, current_sq_a2, friction_w, velocity_sq, ambient_c
-    output_index: np.ndarray    # sub-step after which kept sample k+1 is reached (K-1,)
-    has_velocity: bool
-    has_ambient: bool
-    winding_c: np.ndarray | None = None       # resistance thermometry at the kept samples (NaN: unusable)
-    winding_weight: np.ndarray | None = None  # sensor_noise_c / its standard deviation (0: unusable)
-
-    @property
-    def thermometry_samples(self) -> int:
-        return 0 if self.winding_weight is None else int(np.count_nonzero(self.winding_weight))
-
-    def __len__(self) -> int:
-        return int(self.time_s.size)
-
-
-def _velocity(rec: Recording) -> np.ndarray | None:
-    if rec.velocity is not None:
-        return np.asarray(rec.velocity, float)
-    if rec.position is not None and len(rec) > 2:
-        return np.gradient(np.asarray(rec.position, float), rec.time_s)
-    return None
-
-
-def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSettings | None = None) -> ThermalGrid:
-    """Validate ``rec`` (needs ``current_a`` and ``temperature_c``) and build its integration grid."""
-    settings = settings or ThermalSettings()
-    rec.require("current_a", "temperature_c")
-    src = rec.source or rec.name
-    if len(rec) < 3:
-        raise InputError(src, "time_s", f"{len(rec)} samples", "a thermal fit needs at least 3 samples")
-    t = np.asarray(rec.time_s, float)
-    current = np.asarray(rec.current_a, float)
-    velocity = _velocity(rec)
-    v = np.zeros_like(t) if velocity is None else velocity
-    friction = np.asarray(_friction_w(params)(v[None, :])).ravel()
-    ambient = np.full_like(t, params.thermal.ambient_c) if rec.ambient_c is None else np.asarray(rec.ambient_c, float)
-    features = _bridge_gaps(t, np.vstack([current ** 2, friction, v ** 2, ambient]), settings)
-    keep = _kept(t, settings.min_step_s)
-    dt = np.diff(t)
-    cum = np.concatenate([np.zeros((4, 1)), np.cumsum(features[:, :-1] * dt, axis=1)], axis=1)
-    span = t[keep[1:]] - t[keep[:-1]]
-    held = (cum[:, keep[1:]] - cum[:, keep[:-1]]) / span
-    substeps = np.maximum(np.ceil(span / settings.max_step_s - 1e-9).astype(int), 1)
-    inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
-    thermometry = _thermometry(rec, params, settings, v, keep) if settings.voltage_thermometry else (None, None)
-    return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
-                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry)
-
-
-def _thermometry(rec: Recording, params: JointParameters, settings: "ThermalSettings", velocity: np.ndarray,
-                 keep: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """Winding temperature from the motor voltage and its weight (see :class:`ThermalSettings`)."""
-    if rec.voltage_v is None:
-        return None, None
-    m = params.motor
-    i, v = np.asarray(rec.current_a, float)[keep], velocity[keep]
-    usable = (np.abs(i) >= settings.thermometry_min_current_a) & (np.abs(v) <= settings.thermometry_max_velocity_rad_s)
-    i_safe = np.where(usable, i, 1.0)
-    emf = m.back_emf_v_s_per_rad * m.gear_ratio * v
-    ohm = (np.asarray(rec.voltage_v, float)[keep] - emf) / (m.resistance_ohm * i_safe)
-    winding = np.where(usable, m.resistance_ref_c + (ohm - 1.0) / m.copper_alpha_per_k, np.nan)
-    sigma = settings.thermometry_noise_v / (m.resistance_ohm * m.copper_alpha_per_k * np.abs(i_safe))
-    return winding, np.where(usable, settings.sensor_noise_c / sigma, 0.0)
-
-
-def _bridge_gaps(t: np.ndarray, features: np.ndarray, settings: "ThermalSettings") -> np.ndarray:
-    """Held losses over gaps (intervals longer than ``gap_factor`` median steps): the mean of the
-    samples within ``gap_window_s`` on both sides, not the last sample (of an oscillating current
-    one sample says little about the power during minutes without data)."""
-    dt = np.diff(t)
-    gaps = np.flatnonzero(dt > settings.gap_factor * np.median(dt))
-    if not gaps.size:
-        return features
-    held = features.copy()
-    for k in gaps:
-        near = ((t >= t[k] - settings.gap_window_s) & (t <= t[k])) | \
-               ((t >= t[k + 1]) & (t <= t[k + 1] + settings.gap_window_s))
-        held[:, k] = features[:, near].mean(axis=1)
-    return held
-
-
-def _kept(t: np.ndarray, min_step_s: float) -> np.ndarray:
-    """Indices of the kept samples: the first sample of every ``min_step_s`` bin, and the last."""
-    if min_step_s <= 0:
-        return np.arange(t.size)
-    bins = np.floor((t - t[0]) / min_step_s)
-    keep = np.flatnonzero(np.concatenate(([True], bins[1:] != bins[:-1])))
-    return keep if keep[-1] == t.size - 1 else np.append(keep, t.size - 1)
-
-
-def _friction_w(params: JointParameters) -> ca.Function:
-    v = ca.SX.sym("velocity_rad_s")
-    return ca.Function("friction_w", [v], [motor.friction_w(params.motor, v)], ["velocity_rad_s"], ["friction_w"])
 
 
 # ----------------------------------------------------------------------------- result
