@@ -134,3 +134,50 @@ def test_mx_dynamics_that_cannot_be_expanded_still_solve():
     ref = IpoptSolver(problem).solve([1.0])
     assert res.success and res.info["backend"] == "casadi"
     assert res.cost == pytest.approx(ref.cost, rel=1e-8)
+
+
+@pytest.mark.parametrize("backend", ["casadi", "numpy", "codegen"])
+def test_fused_first_pass_and_first_order_pass_agree_with_the_full_passes(boxed, backend):
+    """evaluate_backward = evaluate + backward; the first-order pass with a pass's own gains gives that
+    pass's stationarity and value gradient a (gap-free iterate, box active)."""
+    problem, ref = boxed
+    be = DDPSolver(problem, DDPSettings(backend=backend)).backend
+    X, U, P = ref.xs.copy(), ref.us + 0.05, np.zeros((N + 1, 0))
+    X[1:] = ref.xs[1:] + 0.01
+    lam, lamN = np.zeros((N, 0)), np.zeros(0)
+    evaluation, (policy, summary, values) = be.evaluate_backward(X, U, P, lam, lamN, 10.0, 0.0)
+    J, G, GN, C = be.evaluate(X, U, P)
+    assert evaluation[0] == pytest.approx(J, rel=1e-14)
+    np.testing.assert_allclose(evaluation[3], C, rtol=0, atol=1e-14)
+    reference = be.backward(X, U, P, lam, lamN, C, 10.0, 0.0)
+    for got, want in zip((policy, summary, values), reference):
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+    Xf, Uf = be.forward(X, U, P, policy, C, 1.0)[:2]  # a full step closes the gaps
+    policy_f, summary_f, values_f = be.backward(Xf, Uf, P, lam, lamN, np.zeros_like(C), 10.0, 0.0)
+    stat, costates = be.gradient(Xf, Uf, P, lam, lamN, policy_f, 10.0)
+    assert stat == pytest.approx(summary_f[2], rel=1e-10, abs=1e-14)
+    np.testing.assert_allclose(costates, values_f[:, :NX], rtol=1e-10, atol=1e-12)
+
+
+def test_compiled_passes_are_found_again_without_rebuilding(monkeypatch):
+    """A second solver for the same problem loads the library through the pass index (no symbolic
+    build); another weight gives another key."""
+    from thermo_ddp.solvers import _backends, _pass_cache
+    first = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
+    assert _pass_cache.load(_pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())) is not None
+    monkeypatch.setattr(_backends, "build_passes", lambda *a: pytest.fail("passes rebuilt"))
+    again = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
+    assert again.iterations == first.iterations
+    np.testing.assert_array_equal(again.us, first.us)
+    assert _pass_cache.key(lq_problem(u_bound=[0.6, 0.5]), DDPSettings()) != \
+        _pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())
+
+
+def test_failed_backward_pass_raises_the_regularisation_past_the_first_failed_pivot():
+    solver = DDPSolver(lq_problem(), DDPSettings(backend="casadi"))
+    lay = solver.layout
+    policy = np.zeros((5, lay.n_policy))
+    policy[:, lay.nu + lay.nu * lay.nx] = [-50.0, 1.0, -3.0, 2.0, 1.0]  # knot 2 fails first (backward in time)
+    assert solver._increase(0.0, policy) == 6.0
+    assert solver._increase(1.0, policy) == 10.0  # x reg_factor when that is larger
+    assert solver._increase(0.0) == solver.settings.reg_min

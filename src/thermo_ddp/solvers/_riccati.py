@@ -190,9 +190,21 @@ def backward_step(ops, model, a, b, Vxx, c, u, lb, ub, reg, box_iterations, has_
     Vxx_new = ops.sym(Qxx + KtQuu @ K + K.T @ Qux + Qux.T @ K)
     d1 = a.T @ c + Qu0.T @ k
     d2 = 2 * (b.T @ c) + c.T @ Vc + 2 * ((B.T @ w).T @ k) + k.T @ Quu @ k
-    stationarity = ops.max_abs(_projected(ops, Qu0, u, lb, ub)) if has_box else ops.max_abs(Qu0)
+    stationarity = _stationarity(ops, Qu0, u, lb, ub, has_box)
     return {"a": a_new, "b": b_new, "Vxx": Vxx_new, "k": k, "K": K, "pivot": pivot,
             "d1": d1, "d2": d2, "stationarity": stationarity}
+
+
+def gradient_step(ops, model, a, K, u, lb, ub, has_box):
+    """The first-order part of :func:`backward_step` with given feedback gains ``K``: the value
+    gradient a = lx + A'a' + K'Qu0 and the projected stationarity |Qu0| (no second derivatives)."""
+    Qu0 = model["lu"] + model["B"].T @ a
+    a_new = model["lx"] + model["A"].T @ a + K.T @ Qu0
+    return a_new, _stationarity(ops, Qu0, u, lb, ub, has_box)
+
+
+def _stationarity(ops, Qu0, u, lb, ub, has_box):
+    return ops.max_abs(_projected(ops, Qu0, u, lb, ub)) if has_box else ops.max_abs(Qu0)
 
 
 def _projected(ops, grad, u, lb, ub):

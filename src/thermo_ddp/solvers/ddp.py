@@ -12,20 +12,29 @@ Method (each part stated, as logged):
 - Control box: box-QP per knot by projected Newton (see _riccati), forward pass clamps.
 - Inequalities g <= 0 (stage and terminal): PHR augmented Lagrangian (as ALTRO, Howell et al.
   IROS 2019): inner DDP iterations on cost + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho);
-  when the inner stationarity is below the current inner tolerance, multipliers are updated
-  lam <- max(0, lam + rho g) and rho grows by ``penalty_factor`` when the violation did not
-  fall to a quarter.
+  when the inner stationarity is below the current inner tolerance (or after
+  ``inner_max_iterations`` inner iterations), multipliers are updated lam <- max(0, lam + rho g)
+  and rho grows by ``penalty_factor`` when the violation did not fall to a quarter of its value
+  at the previous update (at the first update of a cold start: of the initial guess's).
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
-- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed backward
-  pass (non-positive pivot) or line search, and in Gauss-Newton mode also after a step
-  shorter than 1/2 (Levenberg-Marquardt-like damping of a too optimistic model); divided
-  after a full step.
+- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
+  and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
+  of a too optimistic model); on a failed backward pass (non-positive pivot p at the first failing
+  knot, the last in time) raised to at least rho_reg - 2p, so that knot's pivot becomes >= |p|
+  in one retry instead of climbing by ``reg_factor`` from ``reg_min``; divided by the smaller
+  ``reg_decrease`` after a full step (slow decrease, fast increase: fewer failed passes).
 - Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
   no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
   progress is possible above rounding), the largest gap <= ``gap_tolerance`` and
-  |max(g, -lam/rho)|_inf <= ``constraint_tolerance``.
+  |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps closed) from an
+  iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by
+  a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
+  exactly where the full pass's Qu0 is): if within tolerance the solve stops there (K, k are then
+  those of that last pass), otherwise a full backward pass follows as usual.
+- The first backward pass of a solve also evaluates the initial guess (cost, constraints, gaps)
+  in the same sweep over the knots.
 - Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result
   (WarmStart.from_result shifts them); with multipliers the inner tolerance starts at
   ``tolerance``. Measured: Gauss-Newton converges slowly when a heating term R(T) i^2 is
@@ -61,14 +70,15 @@ class DDPSettings:
     gap_tolerance: float = 1e-8             # largest dynamics gap at convergence
     constraint_tolerance: float = 1e-6      # |max(g, -lam/rho)|_inf at convergence
     decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|)
-    inner_tolerance_init: float = 1e-2      # first inner tolerance of the AL loop
-    inner_tolerance_factor: float = 0.1     # inner tolerance shrink per multiplier update
-    inner_max_iterations: int = 25          # multiplier update after this many inner iterations at most
+    inner_tolerance_init: float = 1e-1      # first inner tolerance of the AL loop (cold start)
+    inner_tolerance_factor: float = 0.3     # inner tolerance shrink per converged inner loop
+    inner_max_iterations: int = 20          # multiplier update after this many inner iterations at most
     full_second_order: bool = False         # full DDP (True) or Gauss-Newton iLQR (False)
     reg_init: float = 0.0                   # Quu regularisation at the start of a solve
     reg_min: float = 1e-9                   # smallest non-zero regularisation
     reg_max: float = 1e9
-    reg_factor: float = 10.0
+    reg_factor: float = 10.0                # increase on a failed pass or line search
+    reg_decrease: float = 10.0 ** 0.5       # decrease after a full step (slower than the increase)
     line_search_factor: float = 0.5
     line_search_min_step: float = 1e-4
     armijo: float = 1e-4                    # fraction of the model decrease required
@@ -87,9 +97,8 @@ class DDPSettings:
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
                     "expected an integer >= 0")
         positive = ("tolerance", "decrement_tolerance", "gap_tolerance", "constraint_tolerance",
-                    "inner_tolerance_init", "reg_max",
-                    "reg_factor", "penalty_init", "penalty_factor", "penalty_max", "line_search_min_step",
-                    "infeasibility_growth")
+                    "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease", "penalty_init",
+                    "penalty_factor", "penalty_max", "line_search_min_step", "infeasibility_growth")
         for name in positive:
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0,
@@ -100,8 +109,9 @@ class DDPSettings:
         for name in ("line_search_factor", "armijo", "inner_tolerance_factor"):
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and 0 < v < 1, _SRC, name, v, "expected a number in (0, 1)")
-        require(self.reg_factor > 1 and self.penalty_factor >= 1, _SRC, "reg_factor/penalty_factor",
-                (self.reg_factor, self.penalty_factor), "expected reg_factor > 1 and penalty_factor >= 1")
+        require(self.reg_factor > 1 and self.reg_decrease > 1 and self.penalty_factor >= 1, _SRC,
+                "reg_factor/reg_decrease/penalty_factor", (self.reg_factor, self.reg_decrease, self.penalty_factor),
+                "expected reg_factor > 1, reg_decrease > 1 and penalty_factor >= 1")
         require(self.reg_init <= self.reg_max and self.reg_min <= self.reg_max, _SRC, "reg_init/reg_min",
                 (self.reg_init, self.reg_min), "expected reg_init <= reg_max and reg_min <= reg_max")
         require(self.penalty_init <= self.penalty_max, _SRC, "penalty_init", self.penalty_init,
@@ -144,6 +154,7 @@ class DDPSolver:
             raise InputError("DDPSolver", "settings", type(settings).__name__, "expected DDPSettings or a mapping")
         self.problem, self.settings = problem, settings
         self.layout = Layout(problem.nx, problem.nu)
+        self._ng, self._ngN = problem.n_constraints, problem.n_terminal_constraints  # sizes, computed once
         start = time.perf_counter()
         self.backend = make_backend(problem, settings, self.layout)
         self.build_s = time.perf_counter() - start
@@ -168,7 +179,7 @@ class DDPSolver:
     # -- internals ------------------------------------------------------------------------------
     def _initial_guess(self, x0, warm):
         pr, s = self.problem, self.settings
-        N, ng, ngN = pr.horizon, pr.n_constraints, pr.n_terminal_constraints
+        N, ng, ngN = pr.horizon, self._ng, self._ngN
         lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), s.penalty_init, True
         if warm is None:
             xs, us = np.tile(x0, (N + 1, 1)), np.zeros((N, pr.nu))
@@ -205,25 +216,27 @@ class DDPSolver:
 
     def _run(self, X, U, P, lam, lamN, rho, cold, start) -> SolverResult:
         s, pr, be = self.settings, self.problem, self.backend
-        has_constraints = pr.n_constraints + pr.n_terminal_constraints > 0
-        it_ = _Iterate(X, U, *be.evaluate(X, U, P))
+        has_constraints = self._ng + self._ngN > 0
+        evaluation, first = be.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass, fused
+        it_ = _Iterate(X, U, *evaluation)
         if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
             return self._result(it_, lam, lamN, rho, None, "numerical_error",
                                 "the model gives non-finite values at the initial guess", 0, start,
                                 {k: [] for k in HISTORY_KEYS})
         reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
-        viol_prev = np.inf
+        viol_prev = self._violation(it_) if cold else np.inf  # a cold start's first loop must cut it to a quarter
         al_log: list[tuple[float, float]] = []  # (penalty, violation) at each multiplier update
         hist = {k: [] for k in HISTORY_KEYS}
         status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
-        policy = values = None
-        iteration = passes = inner = 0
+        policy = values = costates = None
+        iteration = passes = inner = checks = 0
         while iteration < s.max_iterations and passes < 4 * s.max_iterations + 20:
             passes += 1
-            policy_try, summary, values_try = be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
+            policy_try, summary, values_try = first or be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
+            first = None
             d1, d2, stat, pivot = summary
             if not (pivot > 0 and np.all(np.isfinite(summary))):
-                reg = self._increase(reg)
+                reg = self._increase(reg, policy_try)
                 log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", iteration, pivot, reg)
                 if reg > s.reg_max:
                     status, message = "regularisation_failed", "Quu not positive definite up to reg_max"
@@ -265,19 +278,40 @@ class DDPSolver:
             step = alpha * float(np.max(np.abs(policy[:, : pr.nu])))
             it_ = trial
             if alpha == 1.0:
-                reg = reg / s.reg_factor if reg / s.reg_factor >= s.reg_min else 0.0
+                reg = reg / s.reg_decrease if reg / s.reg_decrease >= s.reg_min else 0.0
             elif alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
                 reg = self._increase(reg)
             self._record(hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha)
             log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", iteration, it_.J,
                       stat, gap, alpha, reg, rho)
+            if alpha == 1.0 and stat <= s.tolerance ** 0.5 and \
+                    self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho) <= s.constraint_tolerance:
+                checks += 1  # the step closed the gaps: a first-order pass may already show convergence
+                stat_new, a = be.gradient(it_.X, it_.U, P, lam, lamN, policy, rho)
+                if stat_new <= s.tolerance:
+                    status = "converged"
+                    message = "stationarity (previous gains), gaps and constraints within tolerance"
+                    self._record(hist, it_, lam, lamN, rho, stat_new, 0.0, 0.0, reg, 0.0)
+                    costates = a
+                    break
         lam_out = np.maximum(0.0, lam + rho * it_.G)
         lamN_out = np.maximum(0.0, lamN + rho * it_.GN)
-        return self._result(it_, lam_out, lamN_out, rho, (policy, values), status, message, iteration, start,
-                            hist, passes)
+        if costates is None and values is not None:
+            costates = self.layout.costates(values)
+        return self._result(it_, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
+                            hist, passes, checks)
 
-    def _increase(self, reg: float) -> float:
-        return max(reg * self.settings.reg_factor, self.settings.reg_min)
+    def _increase(self, reg: float, policy=None) -> float:
+        """reg x reg_factor; after a failed backward pass (``policy``) at least reg - 2 p, with p the
+        non-positive pivot of the first failed knot (the last in time): that knot's Quu then has pivot >= |p|."""
+        s, lay = self.settings, self.layout
+        reg_new = max(reg * s.reg_factor, s.reg_min)
+        if policy is not None:
+            pivots = policy[:, lay.nu + lay.nu * lay.nx]
+            failed = np.flatnonzero(~(pivots > 0))
+            if failed.size and np.isfinite(pivots[failed[-1]]):
+                reg_new = max(reg_new, reg - 2.0 * pivots[failed[-1]])
+        return reg_new
 
     @staticmethod
     def _violation(it_) -> float:
@@ -328,7 +362,8 @@ class DDPSolver:
                            ("reg", reg), ("alpha", alpha), ("penalty", rho)):
             hist[key].append(float(value))
 
-    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist, passes=0) -> SolverResult:
+    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist, passes=0,
+                checks=0) -> SolverResult:
         pr = self.problem
         solve_s = time.perf_counter() - start
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
@@ -336,7 +371,7 @@ class DDPSolver:
         mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho}
         if pol is not None and pol[0] is not None:
             k, K = self.layout.gains(pol[0])
-            mult["dynamics"] = self.layout.costates(pol[1])[1:]
+            mult["dynamics"] = pol[1][1:]
         finite = bool(np.all(np.isfinite(it_.X)) and np.all(np.isfinite(it_.U)) and np.isfinite(it_.J))
         if not finite and status != "numerical_error":
             status, message = "numerical_error", "non-finite iterate"
@@ -348,5 +383,5 @@ class DDPSolver:
                             xs=it_.X.copy(), us=it_.U.copy(), cost=float(it_.J) if finite else float("inf"),
                             max_constraint_violation=viol,
                             iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
-                            info={"backend": self.backend.name, "backward_passes": passes,
+                            info={"backend": self.backend.name, "backward_passes": passes, "gradient_passes": checks,
                                   "full_second_order": self.settings.full_second_order})
