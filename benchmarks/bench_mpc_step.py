@@ -27,6 +27,8 @@ import numpy as np
 from _common import write
 from _ocp_bench import lift_problem, shifted_nlp_warm_start, timed_solves
 from thermo_ddp.lift import LiftSettings, binding_constraints, initial_guess, make_solver
+from thermo_ddp.mpc import MPCSettings
+from thermo_ddp.mpc.controller import mpc_ddp_settings
 
 KNOTS = 200
 LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}
@@ -37,6 +39,7 @@ VELOCITY_DISTURBANCE = 1e-2  # rad/s, standard deviation
 def mpc_loop(limit_c: float, steps: int, repeats: int) -> dict:
     lp = lift_problem(KNOTS, limit_c)
     solvers = {name: make_solver(lp, name) for name in SOLVERS}
+    solvers["ddp"] = make_solver(lp, "ddp", mpc_ddp_settings(MPCSettings().max_iterations))  # the controller's
     first = {name: s.solve(lp.x0, lp.params, initial_guess(lp)) for name, s in solvers.items()}
     long_params = np.vstack([lp.params, np.repeat(lp.params[-1:], steps, axis=0)])
     rng = np.random.default_rng(0)

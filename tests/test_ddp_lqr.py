@@ -174,10 +174,14 @@ def test_compiled_passes_are_found_again_without_rebuilding(monkeypatch):
 
 
 def test_failed_backward_pass_raises_the_regularisation_past_the_first_failed_pivot():
-    solver = DDPSolver(lq_problem(), DDPSettings(backend="casadi"))
+    solver = DDPSolver(lq_problem(), DDPSettings(backend="casadi", pivot_jump=True))
     lay = solver.layout
     policy = np.zeros((5, lay.n_policy))
     policy[:, lay.nu + lay.nu * lay.nx] = [-50.0, 1.0, -3.0, 2.0, 1.0]  # knot 2 fails first (backward in time)
     assert solver._increase(0.0, policy) == 6.0
     assert solver._increase(1.0, policy) == 10.0  # x reg_factor when that is larger
     assert solver._increase(0.0) == solver.settings.reg_min
+    policy[2, lay.nu + lay.nu * lay.nx] = -1e12  # a jump past reg_max: climb instead
+    assert solver._increase(1.0, policy) == 10.0
+    plain = DDPSolver(lq_problem(), DDPSettings(backend="casadi"))  # default: no jump
+    assert plain._increase(0.0, policy) == plain.settings.reg_min

@@ -81,9 +81,16 @@ def _limit_on_next_state(problem: OptimalControlProblem) -> OptimalControlProble
     return dataclasses.replace(problem, constraints=tuple(constraints), name="lift_mpc")
 
 
+def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
+    """Full-second-order DDP (the R(T) i^2 curvature is in the dynamics), the solver's default schedule (not
+    the lift's tuned one: its pivot jump made re-solves near infeasibility fail more often in the robustness
+    sweep), capped at ``max_iterations`` per period."""
+    return DDPSettings(full_second_order=True, max_iterations=max_iterations)
+
+
 def mpc_solver(lp: LiftProblem, settings: MPCSettings):
-    """Full-second-order DDP (the R(T) i^2 curvature is in the dynamics) with the per-period iteration cap."""
-    return make_solver(lp, "ddp", DDPSettings(full_second_order=True, max_iterations=settings.max_iterations))
+    """The receding-horizon DDP of :func:`mpc_ddp_settings` on ``lp``."""
+    return make_solver(lp, "ddp", mpc_ddp_settings(settings.max_iterations))
 
 
 class RecedingHorizonController:

@@ -21,10 +21,14 @@ Method (each part stated, as logged):
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
 - Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
   and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
-  of a too optimistic model); on a failed backward pass (non-positive pivot p at the first failing
-  knot, the last in time) raised to at least rho_reg - 2p, so that knot's pivot becomes >= |p|
-  in one retry instead of climbing by ``reg_factor`` from ``reg_min``; divided by the smaller
-  ``reg_decrease`` after a full step (slow decrease, fast increase: fewer failed passes).
+  of a too optimistic model); on a failed backward pass multiplied by ``reg_factor`` or, with
+  ``pivot_jump``, raised to at least rho_reg - 2p (p the non-positive pivot at the first failing
+  knot, the last in time; not beyond ``reg_max``), so that knot's pivot becomes >= |p| in one
+  retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
+  Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift
+  does: ``thermo_ddp.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the
+  Levenberg-Marquardt damping stalls Gauss-Newton on the multi-joint hold (300 iterations against
+  32), and the jump made receding-horizon re-solves near infeasibility fail more often.
 - Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
   no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
   progress is possible above rounding), the largest gap <= ``gap_tolerance`` and
@@ -70,15 +74,16 @@ class DDPSettings:
     gap_tolerance: float = 1e-8             # largest dynamics gap at convergence
     constraint_tolerance: float = 1e-6      # |max(g, -lam/rho)|_inf at convergence
     decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|)
-    inner_tolerance_init: float = 1e-1      # first inner tolerance of the AL loop (cold start)
-    inner_tolerance_factor: float = 0.3     # inner tolerance shrink per converged inner loop
-    inner_max_iterations: int = 20          # multiplier update after this many inner iterations at most
+    inner_tolerance_init: float = 1e-2      # first inner tolerance of the AL loop (cold start)
+    inner_tolerance_factor: float = 0.1     # inner tolerance shrink per converged inner loop
+    inner_max_iterations: int = 25          # multiplier update after this many inner iterations at most
     full_second_order: bool = False         # full DDP (True) or Gauss-Newton iLQR (False)
     reg_init: float = 0.0                   # Quu regularisation at the start of a solve
     reg_min: float = 1e-9                   # smallest non-zero regularisation
     reg_max: float = 1e9
     reg_factor: float = 10.0                # increase on a failed pass or line search
-    reg_decrease: float = 10.0 ** 0.5       # decrease after a full step (slower than the increase)
+    reg_decrease: float = 10.0              # decrease after a full step
+    pivot_jump: bool = False                # after a failed pass: reg to at least reg - 2 * (failed pivot)
     line_search_factor: float = 0.5
     line_search_min_step: float = 1e-4
     armijo: float = 1e-4                    # fraction of the model decrease required
@@ -116,8 +121,8 @@ class DDPSettings:
                 (self.reg_init, self.reg_min), "expected reg_init <= reg_max and reg_min <= reg_max")
         require(self.penalty_init <= self.penalty_max, _SRC, "penalty_init", self.penalty_init,
                 "expected <= penalty_max")
-        require(isinstance(self.full_second_order, bool), _SRC, "full_second_order", self.full_second_order,
-                "expected True or False")
+        for name in ("full_second_order", "pivot_jump"):
+            require(isinstance(getattr(self, name), bool), _SRC, name, getattr(self, name), "expected True or False")
         require(self.backend in BACKENDS, _SRC, "backend", self.backend, f"expected one of {', '.join(BACKENDS)}")
         require(isinstance(self.compiler_flags, (tuple, list)) and all(isinstance(f, str) for f in self.compiler_flags),
                 _SRC, "compiler_flags", self.compiler_flags, "expected a tuple of strings")
@@ -306,11 +311,12 @@ class DDPSolver:
         non-positive pivot of the first failed knot (the last in time): that knot's Quu then has pivot >= |p|."""
         s, lay = self.settings, self.layout
         reg_new = max(reg * s.reg_factor, s.reg_min)
-        if policy is not None:
+        if policy is not None and s.pivot_jump:
             pivots = policy[:, lay.nu + lay.nu * lay.nx]
             failed = np.flatnonzero(~(pivots > 0))
-            if failed.size and np.isfinite(pivots[failed[-1]]):
-                reg_new = max(reg_new, reg - 2.0 * pivots[failed[-1]])
+            jump = reg - 2.0 * pivots[failed[-1]] if failed.size else -np.inf
+            if np.isfinite(jump) and jump <= s.reg_max:  # beyond reg_max: climb instead, the pivot may be spurious
+                reg_new = max(reg_new, jump)
         return reg_new
 
     @staticmethod
