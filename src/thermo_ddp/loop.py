@@ -2,9 +2,11 @@
 receding-horizon execution on the robot, for the report's ORIGINAL model and the IMPROVED one.
 
 The "robot" is the testbed's simulated elbow (``thermo_ddp.testbed``) with its concealed physics on:
-friction heating and drive heat. It "records" the seed report's three experiments (section 4.3); the
-tool identifies the report's one-node model (the ORIGINAL: eq. 7 with R(T), constant ambient, no
-friction heat), diagnoses the misfit and writes the IMPROVED parameter file. Both are then used to
+friction heating and drive heat. It "records" the seed report's three experiments (section 4.3) and a
+winding pulse test, with its motor voltage logged; the tool identifies the report's one-node model
+(the ORIGINAL: eq. 7 with R(T), constant ambient, no friction heat), diagnoses the misfit, fits the
+diagnosed structure again on every sample with the voltage as a winding thermometer and writes that
+as the IMPROVED parameter file. Both are then used to
 plan the 40 kg lift under 84 °C and 140 °C (:func:`thermo_ddp.lift.plan_lift`) and to run it in
 closed loop (EKF + receding-horizon DDP of :mod:`thermo_ddp.mpc`) on a plant that carries the
 robot's TRUE physics (:func:`truth_model`).
@@ -22,7 +24,7 @@ Truth mapping (testbed ``PlantParameters`` -> the plant's ``JointParameters`` an
   gripper, the same as the planner's, so the closed loop compares thermal models only.
 
 The original model's sensor node is its winding (the report assumed the sensor reads the winding);
-the EKF measures each model's own sensor node.
+the EKF measures each model's own sensor node, and the improved model's also the motor voltage.
 """
 from __future__ import annotations
 
@@ -69,8 +71,9 @@ class LoopSettings:
     ``pulse_test``: also record :func:`~thermo_ddp.testbed.winding_pulses` (not in the report), which
     excites the winding's time constant. ``voltage``: the robot logs its motor voltage; the
     identification uses it as a winding thermometer and the improved model's observer measures it.
-    The original model is run as the report ran it: casing sensor only, the report's experiments
-    identify it all the same (one node: no winding apart from the sensor for the voltage to inform)."""
+    The original model (the diagnosis' one-node baseline, fitted to the same recordings; one node has no
+    winding apart from its sensor, so the voltage does not inform it) runs on the casing sensor alone,
+    as the report did."""
 
     payload_kg: float = 40.0
     limits_c: tuple[float, ...] = (84.0, 140.0)
