@@ -5,7 +5,7 @@ weights, mode) and prints one JSON object:
 - mode "check": the rollout of the given controls and the problem's total cost on it;
 - mode "bench": SolverFDDP to convergence (median wall time of ``solve``, iterations, cost) and the
   time of one iteration (computeDirection + tryStep(1), i.e. derivatives, backward and forward pass).
-The model is rebuilt exactly as thermo_ddp.arm.build_arm does (reduced model, then armature).
+The model is rebuilt exactly as thermo_ddp.model.arm.build_arm does (reduced model, then armature).
 """
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """The unconstrained Talos left arm (rigid body only): our DDP against crocoddyl's SolverFDDP.
 
 Both sides: the same URDF (example-robot-data 6 talos_reduced.urdf from this venv), the same reduced
-model (every other joint locked at the angle thermo_ddp.arm.build_arm locks it, armature N^2 B_m from
+model (every other joint locked at the angle thermo_ddp.model.arm.build_arm locks it, armature N^2 B_m from
 models/*.toml), 1 joint (elbow) and 7 joints, N = 100, dt = 0.01 s, the same integrator: crocoddyl's
 IntegratedActionModelEuler, i.e. semi-implicit Euler v+ = v + dt a, q+ = q + dt v+ (written here in
-CasADi with analytic Jacobians from thermo_ddp.rigid_body), state and control costs only
+CasADi with analytic Jacobians from thermo_ddp.model.rigid_body), state and control costs only
 (crocoddyl ResidualModelState / ResidualModelControl; no frame costs), the same initial guess
 (x0 at every knot, zero torques). Before timing, one rollout of random torques and its cost are
 compared between the two sides. Ours: DDPSolver, Gauss-Newton (as FDDP), compiled C backend.
@@ -30,10 +30,10 @@ import casadi as ca
 import numpy as np
 
 from _common import write
-from thermo_ddp.actuated_arm import load_model
-from thermo_ddp.arm import ELBOW, LEFT_ARM, robots_dir
+from thermo_ddp.model.actuated import load_model
+from thermo_ddp.model.arm import ELBOW, LEFT_ARM, robots_dir
 from thermo_ddp.ocp import Cost, OptimalControlProblem
-from thermo_ddp.rigid_body import RigidBodyDynamics
+from thermo_ddp.model.rigid_body import RigidBodyDynamics
 from thermo_ddp.solvers import DDPSettings, DDPSolver
 
 HERE = Path(__file__).resolve().parent

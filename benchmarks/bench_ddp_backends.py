@@ -1,14 +1,14 @@
 """Benchmark the DDP backends (codegen C, CasADi VM, numpy) against IPOPT.
 
 Cases (medians over repeated runs, written to benchmarks/results/ddp_backends.json):
-1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (thermo_ddp.examples, also used by
+1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (thermo_ddp.studies.thermal_pendulum, also used by
    tests/test_ddp_vs_ipopt.py; n_thermal=3), N=200, winding limit and voltage limit active; closed loop over
    ``--mpc-steps`` steps, each warm-started from the shifted previous solution; IPOPT is
    warm-started the same way (primal + dual). Ratio ipopt / ddp per step.
    mpc_severe: the same with a limit so tight that the lift stops short.
 2. scaling: one backward + forward pass of the same problem for N = 100..800 (codegen).
 3. arm: unconstrained 7-DOF Talos left arm (example-robot-data URDF talos_left_arm.urdf,
-   CasADi ABA from thermo_ddp.rigid_body), nx=14, nu=7, N=100, RK4: time per iteration (one backward and
+   CasADi ABA from thermo_ddp.model.rigid_body), nx=14, nu=7, N=100, RK4: time per iteration (one backward and
    one forward pass) per backend. (crocoddyl on the same arm: bench_arm_crocoddyl.py.)
 
 Usage: python benchmarks/bench_ddp_backends.py [--quick]
@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from _common import write
-from thermo_ddp.examples import T_AMB, thermal_pendulum
+from thermo_ddp.studies.thermal_pendulum import T_AMB, thermal_pendulum
 from thermo_ddp.ocp import Cost, OptimalControlProblem
 from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, WarmStart
 
@@ -105,17 +105,17 @@ def bench_scaling(repeats):
 
 
 def arm_urdf() -> str:
-    from thermo_ddp.arm import robots_dir
+    from thermo_ddp.model.arm import robots_dir
 
     return str(robots_dir() / "talos_data/robots/talos_left_arm.urdf")
 
 
 def arm_problem(N=100, dt=0.01, analytic=True):
     """Talos left arm, RK4; with ``analytic`` the step Jacobians come from the ABA derivative
-    identity (thermo_ddp.rigid_body) through the RK4 stages, as the project's models provide."""
+    identity (thermo_ddp.model.rigid_body) through the RK4 stages, as the project's models provide."""
     import pinocchio as pin
-    from thermo_ddp.integrators import rk4_step, rk4_step_jacobians
-    from thermo_ddp.rigid_body import RigidBodyDynamics
+    from thermo_ddp.model.integrators import rk4_step, rk4_step_jacobians
+    from thermo_ddp.model.rigid_body import RigidBodyDynamics
 
     model = pin.buildModelFromUrdf(arm_urdf())
     rbd = RigidBodyDynamics(model)

@@ -1,6 +1,6 @@
 """DDP solve time from 1 to 7 joints on the same hold problem (thermal limits present), N = 100.
 
-Problem (thermo_ddp.whole_arm.build_hold_problem): from the hanging posture to the naive posture (forearm
+Problem (thermo_ddp.tasks.whole_arm.build_hold_problem): from the hanging posture to the naive posture (forearm
 horizontal by the elbow, every other joint at 0) with 40 kg at the gripper in 0.8 s, then hold it 0.8 s;
 per joint: winding_limit (84 °C), bus_voltage, joint_range, joint_velocity, current box; the task-space
 hold_band. RK4 at dt = 0.016 s (stable for 7 joints: |lambda|max ~ 110 /s), N = 100. Joint sets by name:
@@ -17,16 +17,13 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write  # noqa: E402
+from _common import write
 
-from thermo_ddp.arm import ELBOW, LEFT_ARM  # noqa: E402
-from thermo_ddp.solvers import DDPSettings, DDPSolver  # noqa: E402
-from thermo_ddp.whole_arm import WholeArmSettings, build_hold_problem, initial_guess, prepare  # noqa: E402
+from thermo_ddp.model.arm import ELBOW, LEFT_ARM
+from thermo_ddp.solvers import DDPSettings, DDPSolver
+from thermo_ddp.tasks.whole_arm import WholeArmSettings, build_hold_problem, initial_guess, prepare
 
 JOINT_SETS = {1: (ELBOW,), 2: ("arm_left_2_joint", ELBOW), 4: LEFT_ARM[:4], 7: LEFT_ARM}
 DT_S, MOVE_S, HOLD_S = 0.016, 0.8, 0.8

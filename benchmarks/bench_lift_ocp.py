@@ -24,7 +24,7 @@ import time
 
 from _common import write
 from _ocp_bench import SCENARIO, SCENARIO_S, lift_problem, nlp_warm_start, row, timed_solves
-from thermo_ddp.lift import LiftSettings, binding_constraints, initial_guess, make_solver, plan_lift
+from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, initial_guess, make_solver, plan_lift
 
 KNOTS = (100, 200, 400, 800)
 LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}

@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from _common import median_time, write
-from thermo_ddp.actuated_arm import load_model
-from thermo_ddp.arm import LEFT_ARM
+from thermo_ddp.model.actuated import load_model
+from thermo_ddp.model.arm import LEFT_ARM
 from thermo_ddp.codegen import compiled
 
 CASES = {"1_joint": ("arm_left_4_joint",), "7_joints": LEFT_ARM}

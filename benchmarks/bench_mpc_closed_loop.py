@@ -12,17 +12,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write  # noqa: E402
+from _common import write
 
-from thermo_ddp.lift import initial_guess, make_solver  # noqa: E402
-from thermo_ddp.mpc import MPCSettings, build_models, mpc_solver, planning_problem, run_closed_loop  # noqa: E402
-from thermo_ddp.solvers import DDPSettings, IpoptSolver, WarmStart  # noqa: E402
+from thermo_ddp.tasks.lift import initial_guess, make_solver
+from thermo_ddp.mpc import MPCSettings, build_models, mpc_solver, planning_problem, run_closed_loop
+from thermo_ddp.solvers import DDPSettings, IpoptSolver, WarmStart
 
 
 def shift_blocks(a: np.ndarray, head: int, block: int, count: int) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 
 from _common import write
 from _ocp_bench import lift_problem, shifted_nlp_warm_start, timed_solves
-from thermo_ddp.lift import LiftSettings, binding_constraints, initial_guess, make_solver
+from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, initial_guess, make_solver
 from thermo_ddp.mpc import MPCSettings
 from thermo_ddp.mpc.controller import mpc_ddp_settings
 

@@ -2,7 +2,7 @@
 +-30 %, casing noise and quantisation, voltage and current noise, initial temperature 30-60 °C), each
 paired with a nominal run; 2 worker processes. Figures: limit violations (target 0), cut-off trips at
 84 °C (measured casing), the minimum margin under the limit and the median hold as a fraction of the
-nominal hold. See thermo_ddp.mpc.sweep.
+nominal hold. See thermo_ddp.studies.sweep.
 
 Usage: python benchmarks/bench_robustness_sweep.py [--runs 200] [--workers 2] [--seed 0]
 """
@@ -10,13 +10,10 @@ from __future__ import annotations
 
 import argparse
 import logging
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import write  # noqa: E402
+from _common import write
 
-from thermo_ddp.mpc.sweep import robustness_sweep  # noqa: E402
+from thermo_ddp.studies.sweep import robustness_sweep
 
 
 def main():

@@ -1,18 +1,27 @@
-"""Shared fixtures: paths to the project's models and to ../shared data."""
+"""Shared fixtures: the packaged parameter files, the repository's real recordings (data/), and the
+recordings whose licence keeps them out of the repository (../shared/data, skipped when absent)."""
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-import matplotlib
 import pytest
 
-matplotlib.use("Agg")
+from thermo_ddp.model.parameters import packaged_parameter_file
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
-MODELS = ROOT / "models"
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "data"
+SHARED_DATA = ROOT.parent / "shared" / "data"
 NOTEBOOKS = ROOT / "notebooks"
+
+
+def shared_data(relative: str) -> Path:
+    """A file of ../shared/data; skips the test when it is absent (its licence is not stated, so the
+    repository does not carry it: see README, "Tests and data")."""
+    path = SHARED_DATA / relative
+    if not path.is_file():
+        pytest.skip(f"needs ../shared/data/{relative} beside the project (not redistributed: no licence stated)")
+    return path
 
 
 def run_notebook(name: str, out_dir: Path, monkeypatch) -> str:
@@ -36,12 +45,15 @@ def _codegen_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def shared_dir() -> Path:
-    if not SHARED.is_dir():
-        pytest.fail(f"shared data not found at {SHARED} (expected ../shared beside the project)")
-    return SHARED
+def emps_csv() -> Path:
+    return shared_data("emps/emps_estimation.csv")
+
+
+@pytest.fixture(scope="session")
+def panda_bag() -> Path:
+    return shared_data("ros/panda_joint_states.bag")
 
 
 @pytest.fixture(scope="session")
 def elbow_file() -> Path:
-    return MODELS / "arm_left_4_joint.toml"
+    return packaged_parameter_file("arm_left_4_joint")

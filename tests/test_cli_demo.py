@@ -1,6 +1,6 @@
 """`thermo-ddp demo`: the figures it prints follow from the model; bad input exits 2 in one line."""
 from thermo_ddp.cli import main
-from thermo_ddp.demo import hold_demo
+from thermo_ddp.studies.demo import hold_demo
 
 
 def test_demo_figures(capsys):

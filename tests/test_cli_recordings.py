@@ -10,8 +10,8 @@ DIAGNOSIS_KEYS = {"physics", "recordings", "baseline", "mismatches", "missing_ph
 
 
 @pytest.fixture(scope="module")
-def emps(shared_dir):
-    return str(shared_dir / "data" / "emps" / "emps_estimation.csv")
+def emps(emps_csv):
+    return str(emps_csv)
 
 
 def test_identify_mechanical_on_emps(emps, tmp_path):
@@ -58,7 +58,7 @@ def test_bad_csv_names_file_column_and_row(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def drive_heated_csvs(tmp_path_factory):
     """Two short recordings of the simulated elbow whose drive heats the motor (hidden from the model)."""
-    from thermo_ddp.testbed import PlantParameters, static_3a, static_4a
+    from thermo_ddp.studies.testbed import PlantParameters, static_3a, static_4a
 
     plant = PlantParameters().with_effects("drive")
     folder = tmp_path_factory.mktemp("thermal")
@@ -80,7 +80,7 @@ def test_identify_thermal_cli(drive_heated_csvs, tmp_path):
 
 
 def test_diagnose_thermal_cli_finds_drive_heating_and_writes_a_loadable_parameter_file(drive_heated_csvs, tmp_path):
-    from thermo_ddp.parameters import parameters_from_dict
+    from thermo_ddp.model.parameters import parameters_from_dict
 
     out = tmp_path / "d.json"
     assert main(["diagnose", "--physics", "thermal", *drive_heated_csvs, "--json", str(out)]) == 0

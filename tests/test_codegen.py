@@ -1,7 +1,7 @@
 """Generated C equals the SX function; the library is cached by the function's hash."""
 import numpy as np
 
-from thermo_ddp.actuated_arm import load_model
+from thermo_ddp.model.actuated import load_model
 from thermo_ddp.codegen import compiled, library_path
 
 

@@ -21,15 +21,14 @@ from thermo_ddp.diagnose.localise import Localisation, Mismatch
 from thermo_ddp.identify import REFERENCE_TERMS, linear_fit
 from thermo_ddp.recordings import Recording
 
-EMPS = Path(__file__).parents[1].parent / "shared" / "data" / "emps" / "emps_estimation.csv"
 PUBLISHED = {"inertia": 95.1089, "viscous_friction": 203.5034, "coulomb_friction": 20.3935}
 CONTRACT_KEYS = {"physics", "recordings", "baseline", "mismatches", "missing_physics", "final", "validation", "unexplained"}
 INTERVAL_KEYS = {"recording", "start_s", "end_s", "regime", "mean_residual"}
 
 
 @pytest.fixture(scope="module")
-def emps_diagnosis():
-    return diagnose_mechanical([EMPS])
+def emps_diagnosis(emps_csv):
+    return diagnose_mechanical([emps_csv])
 
 
 def _velocity_sign_changes(path: Path) -> np.ndarray:
@@ -45,12 +44,12 @@ def _velocity_sign_changes(path: Path) -> np.ndarray:
     return 0.5 * (t[moving][flips] + t[moving][flips + 1])[inner]
 
 
-def test_emps_missing_coulomb_found_located_and_refit(emps_diagnosis):
+def test_emps_missing_coulomb_found_located_and_refit(emps_diagnosis, emps_csv):
     result = emps_diagnosis.to_dict()
     assert [m["term"] for m in result["missing_physics"]] == ["coulomb_friction"]
     # located where the velocity changes sign: every reversal has a "reversal" mismatch next to it
     reversals = [m for m in result["mismatches"] if m["regime"] == "reversal"]
-    crossings = _velocity_sign_changes(EMPS)
+    crossings = _velocity_sign_changes(emps_csv)
     assert len(crossings) == 7
     for tc in crossings:
         assert any(m["start_s"] - 0.05 <= tc <= m["end_s"] + 0.05 for m in reversals), tc
@@ -87,8 +86,8 @@ def test_diagnosis_json_contract(emps_diagnosis, tmp_path):
     assert png.stat().st_size > 20_000
 
 
-def test_files_entry_point(tmp_path):
-    result = diagnose_mechanical_files([str(EMPS)], plot=tmp_path / "p.png")
+def test_files_entry_point(tmp_path, emps_csv):
+    result = diagnose_mechanical_files([str(emps_csv)], plot=tmp_path / "p.png")
     assert [m["term"] for m in result["missing_physics"]] == ["coulomb_friction"]
     assert (tmp_path / "p.png").exists()
 

@@ -12,10 +12,10 @@ import pytest
 from thermo_ddp.diagnose.thermal import diagnose_thermal, diagnose_thermal_files, iron_max, term_specs
 from thermo_ddp.errors import InputError
 from thermo_ddp.identify.thermal import load_joint_parameters
-from thermo_ddp.parameters import parameters_from_dict
+from thermo_ddp.model.parameters import parameters_from_dict
 from thermo_ddp.recordings import Recording
-from thermo_ddp.testbed import EFFECTS, PlantParameters, biceps, random_recording, static_3a, static_4a
-from thermo_ddp.testbed.experiments import random_ambient, random_sensors
+from thermo_ddp.studies.testbed import EFFECTS, PlantParameters, biceps, random_recording, static_3a, static_4a
+from thermo_ddp.studies.testbed.experiments import random_ambient, random_sensors
 
 CONTRACT_KEYS = {"physics", "recordings", "baseline", "mismatches", "missing_physics", "final", "validation",
                  "unexplained"}

@@ -6,7 +6,6 @@ M = 95.1089 kg, Fv = 203.5034 N·s/m, Fc = 20.3935 N, OF = -3.1648 N.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,13 +15,12 @@ from thermo_ddp.identify import (BASELINE_TERMS, REFERENCE_TERMS, MechanicalSett
                                  identify_torque_current, linear_fit)
 from thermo_ddp.recordings import Recording, read_csv
 
-EMPS = Path(__file__).parents[1].parent / "shared" / "data" / "emps" / "emps_estimation.csv"
 PUBLISHED = {"inertia": 95.1089, "viscous_friction": 203.5034, "coulomb_friction": 20.3935, "effort_offset": -3.1648}
 
 
 @pytest.fixture(scope="module")
-def emps() -> Recording:
-    return read_csv(EMPS)
+def emps(emps_csv) -> Recording:
+    return read_csv(emps_csv)
 
 
 def _relative(fit, key):

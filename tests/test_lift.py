@@ -4,10 +4,10 @@ import json
 import numpy as np
 import pytest
 
-from thermo_ddp.actuated_arm import model_from_dict
+from thermo_ddp.model.actuated import model_from_dict
 from thermo_ddp.cli import main
 from thermo_ddp.errors import InputError
-from thermo_ddp.lift import LiftSettings, binding_constraints, build_lift_problem, plan_lift, solve
+from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, build_lift_problem, plan_lift, solve
 
 PLAN_KEYS = {"feasible", "status", "message", "payload_kg", "limit_c", "hold_s", "achieved_hold_s", "joints",
              "time_s", "q_rad", "v_rad_s", "current_a", "voltage_v", "winding_c", "casing_c", "drive_c", "model",
@@ -99,7 +99,7 @@ def test_cli_plan_bad_model_file_exits_2(tmp_path, capsys):
 
 def test_one_node_parameter_file_plans_and_writes_json(tmp_path, elbow_file):
     """The report's one-node model (sensor = winding) plans too; casing_c is then the sensor node."""
-    from thermo_ddp.parameters import load_parameters, parameters_from_dict, save_parameters
+    from thermo_ddp.model.parameters import load_parameters, parameters_from_dict, save_parameters
 
     data = load_parameters(elbow_file).to_dict()
     data["thermal"] = {"model": "one_node", "ambient_c": 26.0, "capacity_j_per_k": 300.0, "resistance_k_per_w": 1.8}

@@ -13,16 +13,16 @@ import json
 import numpy as np
 import pytest
 
-from thermo_ddp.actuated_arm import load_model
-from thermo_ddp.arm import ELBOW
+from thermo_ddp.model.actuated import load_model
+from thermo_ddp.model.arm import ELBOW
 from thermo_ddp.errors import InputError
-from thermo_ddp.loop import (LoopSettings, claim, loop_files, mpc_settings, robot_parameters,
+from thermo_ddp.studies.loop import (LoopSettings, claim, loop_files, mpc_settings, robot_parameters,
                              truth_model, truth_parameters)
 from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
 from thermo_ddp.mpc.plant import Measurement
-from thermo_ddp.parameters import load_parameters
-from thermo_ddp.testbed import JOINT, PlantParameters, steady_state
-from thermo_ddp.testbed.physics import thermal_network
+from thermo_ddp.model.parameters import load_parameters
+from thermo_ddp.studies.testbed import JOINT, PlantParameters, steady_state
+from thermo_ddp.studies.testbed.physics import thermal_network
 
 LIMIT_C = 84.0
 

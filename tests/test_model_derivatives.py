@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from thermo_ddp.actuated_arm import load_model
+from thermo_ddp.model.actuated import load_model
 
 REL_TOL = 1e-6
 
@@ -78,8 +78,8 @@ def test_step_jacobians_are_the_ad_jacobians():
 
 def test_analytic_rk4_jacobians_equal_automatic_differentiation_for_seven_joints():
     """The chain-rule RK4 Jacobians built on the analytic ABA partials equal AD of the RK4 step."""
-    from thermo_ddp.arm import LEFT_ARM
-    from thermo_ddp.integrators import step_jacobians
+    from thermo_ddp.model.arm import LEFT_ARM
+    from thermo_ddp.model.integrators import step_jacobians
 
     model = load_model(LEFT_ARM, payload_kg=40.0)
     ours, ad = model.step_jacobians(0.01), step_jacobians(model.step(0.01))

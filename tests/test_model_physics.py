@@ -4,9 +4,9 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from thermo_ddp.actuated_arm import load_model
-from thermo_ddp.parameters import load_parameters
-from thermo_ddp.thermal import network_from_parameters
+from thermo_ddp.model.actuated import load_model
+from thermo_ddp.model.parameters import load_parameters
+from thermo_ddp.model.thermal import network_from_parameters
 
 ENERGY_TOL = 1e-8  # relative drift of mechanical energy, RK4 at 1 ms over 2 s
 
@@ -55,8 +55,8 @@ def test_implicit_euler_is_stable_at_large_steps_and_agrees_at_small_ones():
 
 @pytest.fixture(scope="module")
 def elbow():
-    from conftest import MODELS
-    return load_parameters(MODELS / "arm_left_4_joint.toml")
+    from thermo_ddp.model.parameters import packaged_parameter_file
+    return load_parameters(packaged_parameter_file("arm_left_4_joint"))
 
 
 def test_idle_motor_sits_at_43c_in_a_26c_room(elbow):

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.lift import initial_guess, make_solver
+from thermo_ddp.tasks.lift import initial_guess, make_solver
 from thermo_ddp.mpc import (ExtendedKalmanFilter, MPCSettings, Plant, RecedingHorizonController, build_models,
                             mpc_solver, perturbed_model, planning_problem, run_closed_loop, scaled_ode)
-from thermo_ddp.integrators import make_step
+from thermo_ddp.model.integrators import make_step
 from thermo_ddp.solvers import DDPSettings, IpoptSolver
 
 LIMIT_C = 84.0

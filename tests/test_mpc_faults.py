@@ -10,7 +10,7 @@ import pytest
 
 from thermo_ddp.mpc import (ExtendedKalmanFilter, FaultySolver, MPCSettings, build_models, mpc_solver,
                             planning_problem, run_closed_loop, stuck_run_length)
-from thermo_ddp.mpc.sweep import robustness_sweep
+from thermo_ddp.studies.sweep import robustness_sweep
 
 LIMIT_C, HOLD_S, DT = 84.0, 12.0, 0.1
 

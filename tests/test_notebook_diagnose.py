@@ -5,7 +5,7 @@ import json
 import os
 
 from conftest import run_notebook
-from thermo_ddp.parameters import parameters_from_dict
+from thermo_ddp.model.parameters import parameters_from_dict
 
 
 def test_diagnose_notebook_runs_and_finds_friction_and_drive_heating(tmp_path, monkeypatch):

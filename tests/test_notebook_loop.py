@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 
 from conftest import run_notebook
-from thermo_ddp.parameters import load_parameters
+from thermo_ddp.model.parameters import load_parameters
 
 
 def test_close_the_loop_notebook_runs_and_the_improved_model_holds_both_limits(tmp_path, monkeypatch):

@@ -1,16 +1,16 @@
 """Parameter files: every joint's file loads; bad files give one clear error naming key and value."""
 import pytest
 
-from thermo_ddp.arm import LEFT_ARM
+from thermo_ddp.model.arm import LEFT_ARM
 from thermo_ddp.errors import InputError
-from thermo_ddp.parameters import dumps_parameters, load_parameters
+from thermo_ddp.model.parameters import dumps_parameters, load_parameters
 
-from conftest import MODELS
+from thermo_ddp.model.parameters import packaged_parameter_file
 
 
 @pytest.mark.parametrize("joint", LEFT_ARM)
 def test_every_left_arm_joint_has_a_valid_file_with_sources(joint):
-    p = load_parameters(MODELS / f"{joint}.toml")
+    p = load_parameters(packaged_parameter_file(joint))
     assert p.joint == joint
     data = p.to_dict()
     for section in ("motor", "thermal", "limits"):

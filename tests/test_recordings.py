@@ -12,8 +12,6 @@ from thermo_ddp.errors import InputError
 from thermo_ddp.recordings import (COLUMNS, Recording, TopicMap, common_time, read_bag, read_bag_joints, read_csv,
                                    resample)
 
-SHARED = Path(__file__).parents[1].parent / "shared" / "data"
-PANDA_BAG = SHARED / "ros" / "panda_joint_states.bag"
 PANDA_TOPIC = "/joint_states_fake"
 
 
@@ -126,8 +124,8 @@ def test_resample_linear_and_bounded():
 
 # ---------- ROS 1: a real bag written by ROS ----------
 
-def test_real_ros1_bag_panda_joint4():
-    rec = read_bag(PANDA_BAG, TopicMap("panda_joint4", joint_states=PANDA_TOPIC))
+def test_real_ros1_bag_panda_joint4(panda_bag):
+    rec = read_bag(panda_bag, TopicMap("panda_joint4", joint_states=PANDA_TOPIC))
     assert len(rec) == 4211 and rec.joint == "panda_joint4"
     assert 139.0 < rec.time_s[-1] < 141.0
     assert rec.columns == ("time_s", "position", "velocity", "effort")
@@ -138,7 +136,7 @@ def test_real_ros1_bag_panda_joint4():
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
-    with Reader(PANDA_BAG) as reader:
+    with Reader(panda_bag) as reader:
         raw = [store.deserialize_ros1(d, c.msgtype) for c, _, d in reader.messages()]
     stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in raw])
     np.testing.assert_allclose(rec.time_s, stamps - stamps[0], atol=1e-9)
@@ -146,27 +144,27 @@ def test_real_ros1_bag_panda_joint4():
         np.testing.assert_array_equal(getattr(rec, field), [getattr(m, field)[3] for m in raw])
 
 
-def test_real_bag_several_joints_one_pass():
-    joints = read_bag_joints(PANDA_BAG, [TopicMap(f"panda_joint{i}", joint_states=PANDA_TOPIC) for i in (1, 4, 7)])
+def test_real_bag_several_joints_one_pass(panda_bag):
+    joints = read_bag_joints(panda_bag, [TopicMap(f"panda_joint{i}", joint_states=PANDA_TOPIC) for i in (1, 4, 7)])
     assert set(joints) == {"panda_joint1", "panda_joint4", "panda_joint7"}
     assert not np.allclose(joints["panda_joint1"].position, joints["panda_joint4"].position)
 
 
-def test_missing_topic_lists_bag_topics():
+def test_missing_topic_lists_bag_topics(panda_bag):
     with pytest.raises(InputError) as err:
-        read_bag(PANDA_BAG, TopicMap("panda_joint4", joint_states=PANDA_TOPIC, temperature="/motor_temperature"))
+        read_bag(panda_bag, TopicMap("panda_joint4", joint_states=PANDA_TOPIC, temperature="/motor_temperature"))
     message = str(err.value)
     assert "/motor_temperature" in message and PANDA_TOPIC in message and "\n" not in message
 
 
-def test_unknown_joint_named():
+def test_unknown_joint_named(panda_bag):
     with pytest.raises(InputError, match="panda_joint9.*panda_joint1"):
-        read_bag(PANDA_BAG, TopicMap("panda_joint9", joint_states=PANDA_TOPIC))
+        read_bag(panda_bag, TopicMap("panda_joint9", joint_states=PANDA_TOPIC))
 
 
 @pytest.mark.parametrize("fraction", [0.001, 0.5, 0.999])
-def test_truncated_bag(tmp_path, fraction):
-    data = PANDA_BAG.read_bytes()
+def test_truncated_bag(tmp_path, fraction, panda_bag):
+    data = panda_bag.read_bytes()
     cut = tmp_path / "cut.bag"
     cut.write_bytes(data[: int(len(data) * fraction)])
     with pytest.raises(InputError, match="cut.bag"):

@@ -4,8 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from thermo_ddp.arm import LEFT_ARM, ArmSettings, build_arm
-from thermo_ddp.rigid_body import RigidBodyDynamics
+from thermo_ddp.model.arm import LEFT_ARM, ArmSettings, build_arm
+from thermo_ddp.model.rigid_body import RigidBodyDynamics
 
 CASES = {1: ("arm_left_4_joint",), 2: ("arm_left_3_joint", "arm_left_4_joint"), 7: LEFT_ARM}
 TOL = 1e-9

@@ -3,11 +3,11 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from thermo_ddp import motor
-from thermo_ddp.actuated_arm import ActuatedArm
-from thermo_ddp.arm import ArmSettings
-from thermo_ddp.parameters import load_parameters, parameters_from_dict
-from thermo_ddp.thermal import AMBIENT, HeatSource, Link, ThermalNetwork, network_from_parameters, one_node_response
+from thermo_ddp.model import motor
+from thermo_ddp.model.actuated import ActuatedArm
+from thermo_ddp.model.arm import ArmSettings
+from thermo_ddp.model.parameters import load_parameters, parameters_from_dict
+from thermo_ddp.model.thermal import AMBIENT, HeatSource, Link, ThermalNetwork, network_from_parameters, one_node_response
 
 ONE_NODE = {"model": "one_node", "ambient_c": 26.0, "capacity_j_per_k": 300.0, "resistance_k_per_w": 1.8}
 

@@ -9,11 +9,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from thermo_ddp.actuated_arm import load_model, model_from_dict
-from thermo_ddp.arm import ELBOW, LEFT_ARM
+from thermo_ddp.model.actuated import load_model, model_from_dict
+from thermo_ddp.model.arm import ELBOW, LEFT_ARM
 from thermo_ddp.errors import InputError
 from thermo_ddp.recordings import TopicMap, read_bag_joints
-from thermo_ddp.whole_arm import (WholeArmSettings, evaluate_posture, gravity_torque_function, hold_temperatures,
+from thermo_ddp.tasks.whole_arm import (WholeArmSettings, evaluate_posture, gravity_torque_function, hold_temperatures,
                                   monitor_bag, naive_posture, optimal_posture, payload_point_function, plan_whole_arm,
                                   static_current_function, winding_indices, _posture_nlp)
 
@@ -248,8 +248,8 @@ def test_monitor_matches_the_simulated_arm_from_a_seven_joint_bag(tmp_path):
     assert idx and "hottest" in mon.report()
 
 
-def test_monitor_on_the_real_panda_bag_says_it_cannot_estimate(shared_dir):
-    bag = shared_dir / "data" / "ros" / "panda_joint_states.bag"
+def test_monitor_on_the_real_panda_bag_says_it_cannot_estimate(panda_bag):
+    bag = panda_bag
     joints = [f"panda_joint{i}" for i in range(1, 8)] + ["panda_finger_joint1", "panda_finger_joint2"]
     maps = [TopicMap(j, joint_states="/joint_states_fake") for j in joints]
     recs = read_bag_joints(bag, maps)

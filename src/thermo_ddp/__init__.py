@@ -1,11 +1,11 @@
 """thermo-ddp: thermal-aware constrained DDP for torque-controlled humanoid arms."""
-from .actuated_arm import ActuatedArm, Trajectory, load_model
-from .arm import LEFT_ARM, ArmSettings, build_arm
+from .model.actuated import ActuatedArm, Trajectory, load_model
+from .model.arm import LEFT_ARM, ArmSettings, build_arm
 from .errors import InputError
-from .lift import LiftPlan, LiftSettings, compare_limits, plan_lift
+from .tasks.lift import LiftPlan, LiftSettings, compare_limits, plan_lift
 from .mpc import MPCSettings, run_closed_loop
-from .parameters import JointParameters, load_parameters, save_parameters
-from .thermal import ThermalNetwork, network_from_parameters, one_node_response
+from .model.parameters import JointParameters, load_parameters, save_parameters
+from .model.thermal import ThermalNetwork, network_from_parameters, one_node_response
 
 __all__ = [
     "ActuatedArm", "ArmSettings", "InputError", "JointParameters", "LEFT_ARM", "LiftPlan", "LiftSettings",

@@ -11,13 +11,13 @@ from .errors import InputError
 
 
 def _demo(args) -> int:
-    from .demo import hold_demo
+    from .studies.demo import hold_demo
     print(hold_demo(args.payload_kg, args.hold_s).report())
     return 0
 
 
 def _plan(args) -> int:
-    from .lift import plan_lift
+    from .tasks.lift import plan_lift
     options = {"solver": args.solver}
     if args.model:
         options["parameter_file"] = args.model
@@ -31,13 +31,13 @@ def _plan(args) -> int:
 
 
 def _compare(args) -> int:
-    from .lift import compare_limits
+    from .tasks.lift import compare_limits
     print(compare_limits(args.payload_kg, tuple(args.limits_c), args.hold_s, solver=args.solver).table())
     return 0
 
 
 def _loop(args) -> int:
-    from .loop import loop_files
+    from .studies.loop import loop_files
     options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle}
     if args.hold_s is not None:
         options["hold_s"] = args.hold_s

@@ -30,6 +30,7 @@ from ..identify.mechanical import (BASELINE_TERMS, STRIBECK_VELOCITY, JointKinem
 from ..recordings import Recording, read_recording
 from .localise import Localisation, LocaliseSettings, ResidualSeries, localise
 from .selection import ModelFit, Selection, SelectionSettings, TermSpec, forward_select
+from .._figures import new_figure
 
 log = logging.getLogger(__name__)
 
@@ -165,13 +166,10 @@ class Diagnosis:
 
     def plot(self, path: str | Path, max_recordings: int = 3) -> Path:
         """Effort with baseline and final fits, residuals with mismatch intervals shaded, velocity."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
 
         sel, path = self.selection, Path(path)
         kins = self.kinematics[:max_recordings]
-        fig, axes = plt.subplots(3, len(kins), figsize=(12 * len(kins), 8), sharex="col", squeeze=False)
+        fig, axes = new_figure(3, len(kins), figsize=(12 * len(kins), 8), sharex="col", squeeze=False)
         start = 0
         for c, kin in enumerate(kins):
             rows = slice(start, start + len(kin.time_s))
@@ -197,7 +195,6 @@ class Diagnosis:
             ax[1].legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         return path
 
 

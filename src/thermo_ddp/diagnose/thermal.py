@@ -48,6 +48,7 @@ from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, 
                                 thermal_regimes)
 from .localise import Localisation, ResidualSeries
 from .selection import ModelFit, Selection, SelectionSettings, TermSpec, forward_select, physical_violations
+from .._figures import new_figure
 
 log = logging.getLogger(__name__)
 
@@ -285,13 +286,10 @@ class ThermalDiagnosis:
     def plot(self, path: str | Path, max_recordings: int = 3) -> Path:
         """Measured, baseline and final sensor temperature; residuals with mismatch intervals shaded;
         current and speed."""
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
 
         sel, path = self.selection, Path(path)
         grids = self.grids[:max_recordings]
-        fig, axes = plt.subplots(3, len(grids), figsize=(9 * len(grids), 9), sharex="col", squeeze=False)
+        fig, axes = new_figure(3, len(grids), figsize=(9 * len(grids), 9), sharex="col", squeeze=False)
         for c, grid in enumerate(grids):
             rows, t, ax = self.baseline_fit.rows(grid.name), grid.time_s, axes[:, c]
             ax[0].plot(t, grid.measured_c, "k.", ms=1.5, label="recorded (casing sensor)")
@@ -313,7 +311,6 @@ class ThermalDiagnosis:
                 a.legend(fontsize=8, loc="best")
         fig.tight_layout()
         fig.savefig(path, dpi=100)
-        plt.close(fig)
         return path
 
 

@@ -1,7 +1,7 @@
 """Thermal identification: output-error nonlinear least squares on the simulated sensor temperature.
 
-The model is the package's lumped network (``thermo_ddp.thermal``) fed by the motor's losses
-(``thermo_ddp.motor``), built with the free parameters as CasADi symbols, so the fit
+The model is the package's lumped network (``thermo_ddp.model.thermal``) fed by the motor's losses
+(``thermo_ddp.model.motor``), built with the free parameters as CasADi symbols, so the fit
 differentiates the same expressions the planner integrates.  Structures (``terms``):
 
 - ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
@@ -50,12 +50,13 @@ import casadi as ca
 import numpy as np
 from scipy import optimize
 
-from .. import motor
+from ..model import motor
 from .._config import require
 from ..errors import InputError
-from ..parameters import JointParameters, ThermalParameters, load_parameters, parameters_from_dict
+from ..model.parameters import (JointParameters, ThermalParameters, load_parameters, packaged_parameter_file,
+                                parameters_from_dict)
 from ..recordings import Recording, read_recording
-from ..thermal import HeatSource, network_from_parameters
+from ..model.thermal import HeatSource, network_from_parameters
 from .fit_report import Z95, FitResult, result_from_jacobian
 from .thermal_data import ThermalGrid, ThermalSettings, thermal_grid
 
@@ -64,7 +65,6 @@ log = logging.getLogger(__name__)
 MODELS = ("one_node", "two_node", "two_node_drive")
 THERMAL_TERMS = ("friction_heating", "drive_heating", "casing_node", "copper_resistance", "iron_losses")
 IRON_KEY = "iron_loss_w_s2_per_rad2"
-DEFAULT_PARAMETER_FILE = Path(__file__).resolve().parents[3] / "models" / "arm_left_4_joint.toml"
 
 _NODE_KEYS = {
     "one_node": ("capacity_j_per_k", "resistance_k_per_w"),
@@ -511,7 +511,7 @@ def _thermometry_notes(model: ThermalModel, grids, sims) -> tuple[str, ...]:
 def load_joint_parameters(parameters: JointParameters | str | Path | None) -> JointParameters:
     if isinstance(parameters, JointParameters):
         return parameters
-    return load_parameters(parameters if parameters is not None else DEFAULT_PARAMETER_FILE)
+    return load_parameters(parameters if parameters is not None else packaged_parameter_file("arm_left_4_joint"))
 
 
 def as_recordings(recordings) -> list[Recording]:

@@ -8,10 +8,10 @@ import dataclasses
 import casadi as ca
 import numpy as np
 
-from .. import motor
+from ..model import motor
 from .._config import require
 from ..errors import InputError
-from ..parameters import JointParameters
+from ..model.parameters import JointParameters
 from ..recordings import Recording
 
 @dataclasses.dataclass(frozen=True)

@@ -11,8 +11,8 @@ import numpy as np
 from tqdm import tqdm
 
 from .._config import settings_from_mapping
-from ..actuated_arm import ActuatedArm, load_model
-from ..arm import ELBOW
+from ..model.actuated import ActuatedArm, load_model
+from ..model.arm import ELBOW
 from .controller import ControlStep, RecedingHorizonController, planning_problem
 from .observer import ExtendedKalmanFilter, ObserverSettings
 from .plant import Measurement, Plant, perturbed_model

@@ -23,10 +23,10 @@ import logging
 import casadi as ca
 import numpy as np
 
-from ..lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, longest_feasible_hold, \
+from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, longest_feasible_hold, \
     make_solver, time_to_limit_s
 from .._config import require
-from ..actuated_arm import ActuatedArm
+from ..model.actuated import ActuatedArm
 from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
 from .settings import MPCSettings

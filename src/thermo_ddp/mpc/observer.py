@@ -28,10 +28,10 @@ import math
 import casadi as ca
 import numpy as np
 
-from .. import motor
+from ..model import motor
 from .._config import require
-from ..actuated_arm import ActuatedArm
-from ..integrators import make_step, step_jacobians
+from ..model.actuated import ActuatedArm
+from ..model.integrators import make_step, step_jacobians
 from .plant import Measurement
 from .settings import MPCSettings
 

@@ -9,7 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..actuated_arm import ActuatedArm
+from ..model.actuated import ActuatedArm
 from .settings import MPCSettings
 
 

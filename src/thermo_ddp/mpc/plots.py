@@ -1,18 +1,16 @@
-"""Closed-loop figure, written to a file (matplotlib, Agg)."""
+"""Closed-loop figure, written to a file (matplotlib)."""
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from .._figures import new_figure
 
 
 def plot_closed_loop(result, path) -> None:
     """Angle; current and voltage; true/estimated/measured temperatures vs limits; solve times."""
     t, tk = result.time_s, result.time_s[:-1]
     s = result.settings
-    fig, ax = plt.subplots(4, 1, figsize=(8, 11), sharex=True)
+    fig, ax = new_figure(4, 1, figsize=(8, 11), sharex=True)
     ax[0].plot(t, np.degrees(result.q_rad), label="elbow angle (true)")
     ax[0].set_ylabel("angle [deg]")
     ax[1].step(tk, result.current_a, where="post", label="current")
@@ -39,4 +37,3 @@ def plot_closed_loop(result, path) -> None:
                     f"margin {result.margin_c:.2f} K")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)

@@ -26,7 +26,7 @@ Method (each part stated, as logged):
   knot, the last in time; not beyond ``reg_max``), so that knot's pivot becomes >= |p| in one
   retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
   Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift
-  does: ``thermo_ddp.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the
+  does: ``thermo_ddp.tasks.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the
   Levenberg-Marquardt damping stalls Gauss-Newton on the multi-joint hold (300 iterations against
   32), and the jump made receding-horizon re-solves near infeasibility fail more often.
 - Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with

@@ -8,10 +8,11 @@ import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
-from .errors import InputError
+from ..errors import InputError
 
 THERMAL_MODELS = ("one_node", "two_node", "two_node_drive")
 
@@ -188,6 +189,15 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
         raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
     return JointParameters(joint, motor, _thermal(source, _section(source, data, "thermal")),
                            limits, dict(sources), source)
+
+
+def packaged_parameter_file(name: str) -> Path:
+    """The parameter file ``<name>.toml`` shipped with the package (``thermo_ddp/models/``)."""
+    path = Path(str(resources.files("thermo_ddp").joinpath("models", f"{name}.toml")))
+    if not path.is_file():
+        shipped = sorted(p.stem for p in path.parent.glob("*.toml"))
+        raise InputError("thermo_ddp/models", "name", name, f"no packaged parameter file; shipped: {', '.join(shipped)}")
+    return path
 
 
 def load_parameters(path: str | Path) -> JointParameters:

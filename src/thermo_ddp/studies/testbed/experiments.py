@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._config import require
-from ..recordings import Recording
+from ..._config import require
+from ...recordings import Recording
 from .physics import (EFFECTS, Ambient, Phase, PlantParameters, PlantSolution, Profile, constant, curl,
                       gaussian_pulses, hold, min_jerk, motor_voltage_v, phase_mechanics, simulate, staircase)
 from .sensors import Sampling, SensorSettings, measure, sample_times

@@ -1,13 +1,13 @@
 """Close the loop: robot recordings -> identification -> diagnosis -> improved model -> plan ->
 receding-horizon execution on the robot, for the report's ORIGINAL model and the IMPROVED one.
 
-The "robot" is the testbed's simulated elbow (``thermo_ddp.testbed``) with its concealed physics on:
+The "robot" is the testbed's simulated elbow (``thermo_ddp.studies.testbed``) with its concealed physics on:
 friction heating and drive heat. It "records" the seed report's three experiments (section 4.3) and a
 winding pulse test, with its motor voltage logged; the tool identifies the report's one-node model
 (the ORIGINAL: eq. 7 with R(T), constant ambient, no friction heat), diagnoses the misfit, fits the
 diagnosed structure again on every sample with the voltage as a winding thermometer and writes that
 as the IMPROVED parameter file. Both are then used to
-plan the 40 kg lift under 84 °C and 140 °C (:func:`thermo_ddp.lift.plan_lift`) and to run it in
+plan the 40 kg lift under 84 °C and 140 °C (:func:`thermo_ddp.tasks.lift.plan_lift`) and to run it in
 closed loop (EKF + receding-horizon DDP of :mod:`thermo_ddp.mpc`) on a plant that carries the
 robot's TRUE physics (:func:`truth_model`).
 
@@ -39,17 +39,19 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from ._config import require, settings_from_mapping
-from .actuated_arm import ActuatedArm, default_parameter_file
-from .arm import ELBOW, ArmSettings
-from .diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
-from .identify.thermal import ThermalFit, identify_thermal, parameter_file
-from .lift import LiftPlan, LiftSettings, plan_lift
-from .mpc import ClosedLoopResult, MPCSettings, run_closed_loop
-from .parameters import JointParameters, load_parameters, parameters_from_dict, save_parameters
+from .._config import require, settings_from_mapping
+from ..model.actuated import ActuatedArm
+from ..model.arm import ELBOW, ArmSettings
+from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
+from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
+from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
+from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
+from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
+                                save_parameters)
 from .testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
                       static_4a, winding_pulses)
-from .thermal import HeatSource, ThermalNetwork, network_from_parameters
+from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
+from .._figures import new_figure
 
 log = logging.getLogger(__name__)
 _SRC = "loop"
@@ -68,7 +70,7 @@ class LoopSettings:
     terminal return constraint contradicts the hold band), sensor ``seed``. ``oracle``: also plan and
     execute with the robot's true parameter file (the best any identified model can do).
 
-    ``pulse_test``: also record :func:`~thermo_ddp.testbed.winding_pulses` (not in the report), which
+    ``pulse_test``: also record :func:`~thermo_ddp.studies.testbed.winding_pulses` (not in the report), which
     excites the winding's time constant. ``voltage``: the robot logs its motor voltage; the
     identification uses it as a winding thermometer and the improved model's observer measures it.
     The original model (the diagnosis' one-node baseline, fitted to the same recordings; one node has no
@@ -131,7 +133,7 @@ def truth_parameters(robot: PlantParameters, base: JointParameters | None = None
     """The robot's true parameters as a parameter file (see the module docstring for the mapping).
     ``friction_heating_fraction`` is the TOTAL share of friction heat in the motor (1 or 0); the
     split between winding and casing is in :func:`truth_network`."""
-    base = base or load_parameters(default_parameter_file(ELBOW))
+    base = base or load_parameters(packaged_parameter_file(ELBOW))
     r = robot
     motor = {k: getattr(r, k) for k in ("gear_ratio", "torque_constant_nm_per_a", "resistance_ohm",
                                        "resistance_ref_c", "copper_alpha_per_k", "rotor_inertia_kg_m2",
@@ -148,7 +150,7 @@ def truth_parameters(robot: PlantParameters, base: JointParameters | None = None
     data = base.to_dict()
     data["motor"].update(motor)
     data["thermal"] = thermal
-    data["sources"] = {"truth": "thermo_ddp.testbed PlantParameters of the simulated robot (hidden from the tool); "
+    data["sources"] = {"truth": "thermo_ddp.studies.testbed PlantParameters of the simulated robot (hidden from the tool); "
                                 f"friction heat split {r.friction_to_winding:g} winding / "
                                 f"{1 - r.friction_to_winding:g} casing"}
     return parameters_from_dict(data, "testbed truth")
@@ -368,12 +370,9 @@ _COLORS = {"original": "tab:blue", "improved": "tab:green", ORACLE: "tab:gray"}
 
 
 def plot_loop(result: LoopResult, path: Path) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     limits = result.settings.limits_c
-    fig, axes = plt.subplots(3, len(limits), figsize=(7 * len(limits), 10), sharex="col", squeeze=False)
+    fig, axes = new_figure(3, len(limits), figsize=(7 * len(limits), 10), sharex="col", squeeze=False)
     for c, lim in enumerate(limits):
         ax = axes[:, c]
         for model in result.settings.models:
@@ -395,19 +394,15 @@ def plot_loop(result: LoopResult, path: Path) -> Path:
             a.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     return path
 
 
 def plot_summary(result: LoopResult, path: Path) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     rows = result.rows()
     labels = [f"{r['model']}\n{r['limit_c']:g} °C" for r in rows]
     x = np.arange(len(rows))
-    fig, ax = plt.subplots(1, 2, figsize=(12, 4))
+    fig, ax = new_figure(1, 2, figsize=(12, 4))
     ax[0].bar(x - 0.2, [r["planned_hold_s"] for r in rows], 0.4, label="planned (open loop, model)")
     ax[0].bar(x + 0.2, [r["closed_loop_hold_s"] for r in rows], 0.4, label="executed (closed loop, robot)")
     ax[0].axhline(result.settings.hold_s, c="grey", ls=":", label="requested")
@@ -422,7 +417,6 @@ def plot_summary(result: LoopResult, path: Path) -> Path:
     ax[0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
-    plt.close(fig)
     return path
 
 

@@ -16,7 +16,7 @@ from typing import Mapping
 import numpy as np
 import pinocchio as pin
 
-from .errors import InputError
+from ..errors import InputError
 
 log = logging.getLogger(__name__)
 

@@ -16,18 +16,11 @@ import numpy as np
 
 from . import motor
 from .arm import Arm, ArmSettings, build_arm
-from .errors import InputError
+from ..errors import InputError
 from .integrators import make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
-from .parameters import JointParameters, load_parameters, parameters_from_dict
+from .parameters import JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict
 from .rigid_body import RigidBodyDynamics
-from .thermal import ThermalNetwork, network_from_parameters
-
-MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
-
-
-def default_parameter_file(joint: str) -> Path:
-    return MODELS_DIR / f"{joint}.toml"
-
+from .thermal import ThermalNetwork, joint_heat_rhs, network_from_parameters
 
 @dataclass(frozen=True)
 class ActuatedArm:
@@ -186,11 +179,10 @@ def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Functi
         m, net = params[j].motor, networks[j]
         temps = x[offsets[k]:offsets[k + 1]]
         winding = temps[net.index(net.limit_node)]
-        losses = motor.losses_w(m, u[k], v[k], winding)
         tau.append(motor.joint_torque_nm(m, u[k], v[k]))
-        dtemps.append(net.rhs(temps, losses, ambient))
+        dtemps.append(joint_heat_rhs(net, m, temps, u[k], v[k], ambient))
         for key, val in (("voltage_v", motor.voltage_v(m, u[k], v[k], winding)), ("joint_torque_nm", tau[-1]),
-                         ("joule_w", losses["joule_w"]), ("friction_w", losses["friction_w"]),
+                         ("joule_w", motor.joule_w(m, u[k], winding)), ("friction_w", motor.friction_w(m, v[k])),
                          ("winding_c", winding), ("sensor_c", temps[net.index(net.sensor_node)])):
             outs[key].append(val)
     tau, dtemps = ca.vertcat(*tau), ca.vertcat(*dtemps)
@@ -229,8 +221,8 @@ def model_from_dict(data: Mapping) -> ActuatedArm:
 def load_model(joints=("arm_left_4_joint",), payload_kg: float = 0.0, payload_lever_m: float | None = None,
                posture: Mapping[str, float] | None = None,
                parameter_files: Mapping[str, str | Path] | None = None) -> ActuatedArm:
-    """The composed model from ``models/<joint>.toml`` (or the given files)."""
-    files = {j: default_parameter_file(j) for j in joints}
+    """The composed model from the packaged ``models/<joint>.toml`` (or the given files)."""
+    files = {j: packaged_parameter_file(j) for j in joints}
     files.update(parameter_files or {})
     kwargs = {} if payload_lever_m is None else {"payload_lever_m": payload_lever_m}
     settings = ArmSettings(joints=tuple(joints), posture=dict(posture or {}), payload_kg=payload_kg, **kwargs)

@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from .closed_loop import run_closed_loop
-from .controller import mpc_solver, planning_problem
-from .closed_loop import build_models
-from .observer import ObserverSettings
-from .settings import MPCSettings
+from ..mpc.closed_loop import run_closed_loop
+from ..mpc.controller import mpc_solver, planning_problem
+from ..mpc.closed_loop import build_models
+from ..mpc.observer import ObserverSettings
+from ..mpc.settings import MPCSettings
 
 # [thermal] values drawn independently in +-THERMAL_SPREAD (every numeric one but the room and the
 # friction-heat share); the planner keeps the file's values.

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._config import require
+from ..._config import require
 
 TIME_RESOLUTION_S = 1e-3  # time stamps are rounded to the millisecond
 NOISE_FIELDS = ("temperature_noise_c", "temperature_quantum_c", "current_noise_a", "position_noise_rad",

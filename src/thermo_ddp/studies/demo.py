@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .actuated_arm import load_model
+from ..model.actuated import load_model
 
 ELBOW = "arm_left_4_joint"
 

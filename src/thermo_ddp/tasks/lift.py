@@ -21,13 +21,13 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from . import motor
-from ._config import require, settings_from_mapping
-from .actuated_arm import ActuatedArm, load_model
-from .arm import ELBOW
-from .integrators import rk4_substeps
-from .ocp import Constraint, Cost, OptimalControlProblem
-from .solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
+from ..model import motor
+from .._config import require, settings_from_mapping
+from ..model.actuated import ActuatedArm, load_model
+from ..model.arm import ELBOW
+from ..model.integrators import rk4_substeps
+from ..ocp import Constraint, Cost, OptimalControlProblem
+from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """The whole arm: several joints, each with its own motor, thermal network and winding limit.
 
-Three parts, all on the composed model of :mod:`thermo_ddp.actuated_arm` (joints chosen by name):
+Three parts, all on the composed model of :mod:`thermo_ddp.model.actuated` (joints chosen by name):
 
 1. **Posture** (:func:`optimal_posture`): hold ``payload_kg`` at a task point with the posture whose
    hottest winding stays coolest. A small NLP (IPOPT) over the joint angles q and an epigraph
@@ -42,18 +42,18 @@ import casadi as ca
 import numpy as np
 from tqdm.auto import tqdm
 
-from . import motor
-from ._config import require, settings_from_mapping
-from .actuated_arm import ActuatedArm, default_parameter_file, load_model
-from .arm import ELBOW, LEFT_ARM
-from .integrators import rk4
+from ..model import motor
+from .._config import require, settings_from_mapping
+from ..model.actuated import ActuatedArm, load_model
+from ..model.arm import ELBOW, LEFT_ARM
+from ..model.integrators import rk4
 from .lift import min_jerk
-from .ocp import Constraint, Cost, OptimalControlProblem
-from .parameters import JointParameters, load_parameters
-from .recordings import Recording, TopicMap, read_bag_joints
-from .rigid_body import RigidBodyDynamics
-from .solvers import DDPSettings, DDPSolver, SolverResult, WarmStart
-from .thermal import network_from_parameters
+from ..ocp import Constraint, Cost, OptimalControlProblem
+from ..model.parameters import JointParameters, load_parameters, packaged_parameter_file
+from ..recordings import Recording, TopicMap, read_bag_joints
+from ..model.rigid_body import RigidBodyDynamics
+from ..solvers import DDPSettings, DDPSolver, SolverResult, WarmStart
+from ..model.thermal import network_from_parameters
 
 log = logging.getLogger(__name__)
 _SRC = "plan_whole_arm"
@@ -812,7 +812,7 @@ def monitor_recordings(recordings: Mapping[str, Recording], limit_c: float = 84.
     files = dict(parameter_files or {})
     out = []
     for joint, rec in tqdm(recordings.items(), desc="joints", unit="joint", leave=False, disable=None):
-        path = Path(files.get(joint, default_parameter_file(joint)))
+        path = Path(files.get(joint, packaged_parameter_file(joint)))
         missing = _missing_signal(rec, joint, limit_c)
         if missing is not None:
             out.append(missing)

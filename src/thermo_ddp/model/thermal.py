@@ -12,6 +12,7 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
+from . import motor
 from .parameters import ThermalParameters
 
 AMBIENT = "ambient"
@@ -97,6 +98,16 @@ class ThermalNetwork:
         f = ca.Function("steady", [temps], [ca.jacobian(rhs, temps), rhs])
         a, b = (np.array(m, dtype=float) for m in f(np.zeros(len(self.nodes))))
         return np.linalg.solve(a, -b.ravel())
+
+
+def joint_heat_rhs(network: ThermalNetwork, motor_params, temperatures_c, current_a, velocity_rad_s, ambient_c):
+    """dT/dt of one joint's network heated by its motor's losses (R(T) at the limit node, the winding).
+
+    The one place where motor losses meet a thermal network: the model, the whole-arm hold, the
+    observer and identification all call it (``motor_params`` may hold CasADi symbols)."""
+    winding_c = temperatures_c[network.index(network.limit_node)]
+    losses = motor.losses_w(motor_params, current_a, velocity_rad_s, winding_c)
+    return network.rhs(temperatures_c, losses, ambient_c)
 
 
 def network_from_parameters(th: ThermalParameters) -> ThermalNetwork:

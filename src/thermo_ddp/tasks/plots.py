@@ -1,11 +1,9 @@
-"""Figures, written to files (matplotlib, Agg)."""
+"""Figures, written to files (matplotlib)."""
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from .._figures import new_figure
 
 
 def plot_lift(plan, path) -> None:
@@ -13,7 +11,7 @@ def plot_lift(plan, path) -> None:
     t = plan.time_s
     joint = plan.model.joints[0]
     params = plan.model.params[joint]
-    fig, ax = plt.subplots(4, 1, figsize=(8, 10), sharex=True)
+    fig, ax = new_figure(4, 1, figsize=(8, 10), sharex=True)
     ax[0].plot(t, np.degrees(plan.series("q_rad")), label="elbow angle")
     ax[0].axhline(np.degrees(plan.settings.goal_rad), ls=":", c="k", label="goal")
     ax[0].set_ylabel("angle [deg]")
@@ -37,4 +35,3 @@ def plot_lift(plan, path) -> None:
     ax[0].set_title(f"{plan.settings.payload_kg:g} kg lift, limit {plan.settings.limit_c:g} °C: {plan.status}")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)

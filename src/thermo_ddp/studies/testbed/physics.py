@@ -1,6 +1,6 @@
 """True plant of the simulated elbow: numpy equations, scipy integration.
 
-Deliberately independent of the package's model code (no thermo_ddp.thermal / motor /
+Deliberately independent of the package's model code (no thermo_ddp.model.thermal / motor /
 actuated_arm, no CasADi): the diagnosis tests compare those models against this plant.
 
 Conventions
@@ -27,7 +27,7 @@ from typing import Callable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .._config import require
+from ..._config import require
 
 Signal = Callable[[np.ndarray], np.ndarray]
 Motion = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .ocp import Constraint, Cost, OptimalControlProblem
+from ..ocp import Constraint, Cost, OptimalControlProblem
 
 # toy constants (SI); chosen so the limits bite within a 2 s horizon
 MASS, LENGTH, GRAV, DAMP = 1.0, 0.5, 9.81, 0.1
