@@ -13,7 +13,11 @@ differentiates the same expressions the planner integrates.  Structures (``terms
   of the parameter file) heats the sensor node (one_node) or the casing;
 - ``copper_resistance``: ``copper_alpha_per_k`` free (eq. 3);
 - ``iron_losses``: ``iron_loss_w_s2_per_rad2`` k, a speed-dependent loss k v^2 (joint-side v) in the
-  winding node.  It has no key in the contract's parameter file.
+  winding node: the contract's iron loss with ``iron_loss_w`` = k at 1 rad/s and exponent 2.
+
+The file's other optional [thermal] keys (``sensor``, the contract's friction heat, drive losses
+without a drive node) are held at their values in every structure: the network is the planner's
+(``network_from_parameters``, heated through ``joint_heat_rhs``).
 
 Simulation: each recording on its own (possibly irregular) time grid, inputs held between samples
 (zero-order hold).  Samples closer than ``min_step_s`` are merged (the held losses are averaged
@@ -50,36 +54,29 @@ import casadi as ca
 import numpy as np
 from scipy import optimize
 
-from ..model import motor
 from .._config import require
 from ..errors import InputError
-from ..model.parameters import (JointParameters, ThermalParameters, load_parameters, packaged_parameter_file,
-                                parameters_from_dict)
+from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
+                                packaged_parameter_file, parameters_from_dict, unit)
 from ..recordings import Recording, read_recording
-from ..model.thermal import HeatSource, network_from_parameters
+from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, result_from_jacobian
-from .thermal_data import ThermalGrid, ThermalSettings, thermal_grid
+from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
 
-MODELS = ("one_node", "two_node", "two_node_drive")
+MODELS = THERMAL_MODELS
 THERMAL_TERMS = ("friction_heating", "drive_heating", "casing_node", "copper_resistance", "iron_losses")
 IRON_KEY = "iron_loss_w_s2_per_rad2"
+# The iron_losses term k v^2 is the contract's iron loss at 1 rad/s with exponent 2: iron_loss_w = k.
+_IRON_CONTRACT = {"iron_loss_ref_speed_rad_s": 1.0, "iron_loss_speed_exponent": 2.0}
 
-_NODE_KEYS = {
-    "one_node": ("capacity_j_per_k", "resistance_k_per_w"),
-    "two_node": ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w",
-                 "casing_ambient_k_per_w"),
-}
-_NODE_KEYS["two_node_drive"] = _NODE_KEYS["two_node"] + (
-    "drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w", "drive_idle_w", "drive_loss_w_per_a2")
 _TERM_KEYS = {"friction_heating": ("friction_heating_fraction",), "copper_resistance": ("copper_alpha_per_k",),
               "iron_losses": (IRON_KEY,)}
-UNITS = {"capacity_j_per_k": "J/K", "resistance_k_per_w": "K/W", "winding_capacity_j_per_k": "J/K",
-         "casing_capacity_j_per_k": "J/K", "winding_casing_k_per_w": "K/W", "casing_ambient_k_per_w": "K/W",
-         "drive_capacity_j_per_k": "J/K", "drive_casing_k_per_w": "K/W", "drive_ambient_k_per_w": "K/W",
-         "drive_idle_w": "W", "drive_loss_w_per_a2": "W/A^2", "friction_heating_fraction": "",
-         "copper_alpha_per_k": "1/K", IRON_KEY: "W s^2/rad^2"}
+# Optional [thermal] keys a term decides (absent term: default); the file's other optional keys are kept.
+_TERM_OWNED = ("friction_heating_fraction", "iron_loss_w", *_IRON_CONTRACT)
+UNITS = {k: unit(k) for k in {*(k for keys in THERMAL_KEYS.values() for k in keys), "friction_heating_fraction",
+                              "copper_alpha_per_k"}} | {IRON_KEY: "W s^2/rad^2"}
 # Search bounds of the optimiser (wide, technical; the diagnosis checks narrower physical ranges).
 # "log": fitted as log(value); "lin": fitted as value / scale.
 _SEARCH = {
@@ -129,7 +126,7 @@ def structure_name(terms: Sequence[str]) -> str:
 
 
 def free_keys(terms: Sequence[str]) -> tuple[str, ...]:
-    keys = _NODE_KEYS[network_model(terms)]
+    keys = THERMAL_KEYS[network_model(terms)]
     for term in THERMAL_TERMS:
         if term in terms:
             keys += _TERM_KEYS.get(term, ())
@@ -142,6 +139,20 @@ def lumped(th: ThermalParameters) -> tuple[float, float]:
         return th["capacity_j_per_k"], th["resistance_k_per_w"]
     return (th["winding_capacity_j_per_k"] + th["casing_capacity_j_per_k"],
             th["winding_casing_k_per_w"] + th["casing_ambient_k_per_w"])
+
+
+def structure_parameters(th: ThermalParameters, model: str, values: Mapping[str, object]) -> ThermalParameters:
+    """The thermal parameters of a structure: ``model`` with ``values`` (free symbols or fixed numbers,
+    contract or term keys) and the file's optional keys that no term decides (``sensor``, ...)."""
+    kept = {k: v for k, v in th.values.items()
+            if k not in THERMAL_KEYS[th.model] and k not in _TERM_OWNED and k not in THERMAL_KEYS[model]}
+    own = {k: values[k] for k in THERMAL_KEYS[model]}
+    own["friction_heating_fraction"] = values.get("friction_heating_fraction", 0.0)
+    if IRON_KEY in values:
+        own |= {"iron_loss_w": values[IRON_KEY], **_IRON_CONTRACT}
+    sensor = th.sensor if model != "one_node" else None
+    return dataclasses.replace(th, model=model, values=kept | own, sensor=sensor,
+                               friction_heat_node=th.friction_heat_node if model != "one_node" else "winding")
 
 
 def start_values(params: JointParameters, terms: Sequence[str],
@@ -187,15 +198,10 @@ class ThermalModel:
         self.keys = tuple(k for k in free_keys(self.terms) if k not in self.fixed)
         symbols = ca.SX.sym("parameters", len(self.keys))
         sym = {k: symbols[i] for i, k in enumerate(self.keys)} | self.fixed
-        values = {k: sym[k] for k in _NODE_KEYS[self.model]}
-        values["friction_heating_fraction"] = sym.get("friction_heating_fraction", 0.0)
-        network = network_from_parameters(ThermalParameters(self.model, params.thermal.ambient_c, values))
-        if IRON_KEY in sym:
-            network = dataclasses.replace(network, sources=network.sources + (HeatSource("winding", "iron_w", sym[IRON_KEY]),))
-        self.network = network
-        self.nodes = network.nodes
-        self.sensor = network.index(network.sensor_node)
-        self.winding = network.index("winding")
+        self.network = network_from_parameters(structure_parameters(params.thermal, self.model, sym))
+        self.nodes = self.network.nodes
+        self.sensor = self.network.index(self.network.sensor_node)
+        self.winding = self.network.index("winding")
         m = SimpleNamespace(**dataclasses.asdict(params.motor))
         if "copper_alpha_per_k" in sym:
             m.copper_alpha_per_k = sym["copper_alpha_per_k"]
@@ -205,11 +211,11 @@ class ThermalModel:
     def _build(self, p: ca.SX, m: SimpleNamespace) -> None:
         n, q = len(self.nodes), len(self.keys) + 1  # + the initial offset
         temps = ca.SX.sym("temperatures_c", n)
-        u = ca.SX.sym("inputs", 5)  # step_s, current_sq_a2, friction_w, velocity_sq, ambient_c
-        h, i_sq, p_fric, v_sq, ambient = (u[k] for k in range(5))
-        powers = motor.losses_w(m, ca.sqrt(i_sq), 0.0, temps[self.network.index("winding")])
-        powers |= {"friction_w": p_fric, "iron_w": v_sq}
-        rhs = self.network.rhs(temps, powers, ambient)
+        u = ca.SX.sym("inputs", len(INPUT_ROWS))
+        row = {name: u[k] for k, name in enumerate(INPUT_ROWS)}
+        held = {key: row[key] for key in INPUT_ROWS[2:] if key != "ambient_c"}  # the held loss drivers
+        rhs = joint_heat_rhs(self.network, m, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held)
+        h = row["step_s"]
         a = ca.jacobian(rhs, temps)
         b = ca.substitute(rhs, temps, ca.SX.zeros(n))
         nxt = temps + h * ca.solve(ca.SX.eye(n) - 0.5 * h * a, rhs)
@@ -555,23 +561,21 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
 
 
 def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = ()) -> dict:
-    """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict).
-    ``iron_losses`` has no contract key: its value is recorded in [sources] only."""
+    """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
+    ``iron_losses`` k v^2 is written as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2)."""
     data = params.to_dict()
     values = dict(fit.parameters)
-    thermal = {"model": network_model(fit.terms), "ambient_c": params.thermal.ambient_c}
-    thermal |= {k: values[k] for k in _NODE_KEYS[thermal["model"]]}
-    thermal["friction_heating_fraction"] = values.get("friction_heating_fraction", 0.0)
-    data["thermal"] = thermal
+    model = network_model(fit.terms)
+    data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()
     if "copper_alpha_per_k" in values:
         data["motor"]["copper_alpha_per_k"] = values["copper_alpha_per_k"]
-    where = ", ".join(recordings) or "recordings"
-    data["sources"] = {k: v for k, v in data["sources"].items() if k not in thermal and k not in values}
-    for key in list(thermal)[2:] + [k for k in ("copper_alpha_per_k",) if k in values]:
-        data["sources"][key] = f"identified by thermo-ddp ({fit.model}, output-error least squares) from {where}"
+    identified = [*THERMAL_KEYS[model], *(k for k in ("friction_heating_fraction", "copper_alpha_per_k") if k in values)]
     if IRON_KEY in values:
-        data["sources"][IRON_KEY] = (f"identified {values[IRON_KEY]:.4g} W s^2/rad^2 (iron loss k v^2): no contract key, "
-                                     "not used by the planner")
+        identified += ["iron_loss_w", *_IRON_CONTRACT]
+    where = ", ".join(recordings) or "recordings"
+    data["sources"] = {k: v for k, v in data["sources"].items() if k not in identified}
+    for key in identified:
+        data["sources"][key] = f"identified by thermo-ddp ({fit.model}, output-error least squares) from {where}"
     return parameters_from_dict(data, f"identified from {where}").to_dict()
 
 

@@ -12,7 +12,13 @@ from ..model import motor
 from .._config import require
 from ..errors import InputError
 from ..model.parameters import JointParameters
+from ..model.thermal import feature_key, feature_value
 from ..recordings import Recording
+
+# Loss drivers held over each (sub-)step, (name in motor.losses_w, exponent): rows 1-3 and 5 of
+# ThermalGrid.inputs; row 0 is the step length, row 4 the ambient.
+DRIVERS = (("current_sq_a2", 1.0), ("friction_w", 1.0), ("speed_abs_rad_s", 2.0), ("speed_abs_rad_s", 1.0))
+INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", feature_key(*DRIVERS[3]))
 
 @dataclasses.dataclass(frozen=True)
 class ThermalSettings:
@@ -72,7 +78,7 @@ class ThermalGrid:
     measured_c: np.ndarray      # measured sensor temperature at the kept samples (K,)
     current_a: np.ndarray       # at the kept samples (for regimes and plots)
     velocity: np.ndarray        # at the kept samples (zeros when the recording has none)
-    inputs: np.ndarray          # (5, S): step_s, current_sq_a2, friction_w, velocity_sq, ambient_c
+    inputs: np.ndarray          # (6, S): the held INPUT_ROWS of every sub-step
     output_index: np.ndarray    # sub-step after which kept sample k+1 is reached (K-1,)
     has_velocity: bool
     has_ambient: bool
@@ -106,12 +112,12 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     current = np.asarray(rec.current_a, float)
     velocity = _velocity(rec)
     v = np.zeros_like(t) if velocity is None else velocity
-    friction = np.asarray(_friction_w(params)(v[None, :])).ravel()
+    drivers = np.array(_drivers(params)(current[None, :], v[None, :]))
     ambient = np.full_like(t, params.thermal.ambient_c) if rec.ambient_c is None else np.asarray(rec.ambient_c, float)
-    features = _bridge_gaps(t, np.vstack([current ** 2, friction, v ** 2, ambient]), settings)
+    features = _bridge_gaps(t, np.vstack([drivers[:3], ambient, drivers[3:]]), settings)
     keep = _kept(t, settings.min_step_s)
     dt = np.diff(t)
-    cum = np.concatenate([np.zeros((4, 1)), np.cumsum(features[:, :-1] * dt, axis=1)], axis=1)
+    cum = np.concatenate([np.zeros((len(features), 1)), np.cumsum(features[:, :-1] * dt, axis=1)], axis=1)
     span = t[keep[1:]] - t[keep[:-1]]
     held = (cum[:, keep[1:]] - cum[:, keep[:-1]]) / span
     substeps = np.maximum(np.ceil(span / settings.max_step_s - 1e-9).astype(int), 1)
@@ -162,6 +168,9 @@ def _kept(t: np.ndarray, min_step_s: float) -> np.ndarray:
     return keep if keep[-1] == t.size - 1 else np.append(keep, t.size - 1)
 
 
-def _friction_w(params: JointParameters) -> ca.Function:
-    v = ca.SX.sym("velocity_rad_s")
-    return ca.Function("friction_w", [v], [motor.friction_w(params.motor, v)], ["velocity_rad_s"], ["friction_w"])
+def _drivers(params: JointParameters) -> ca.Function:
+    """The DRIVERS at a sample's current and velocity (none depends on the temperature)."""
+    i, v = ca.SX.sym("current_a"), ca.SX.sym("velocity_rad_s")
+    losses = motor.losses_w(params.motor, i, v, params.motor.resistance_ref_c)
+    return ca.Function("thermal_drivers", [i, v], [ca.vertcat(*(feature_value(losses, *d) for d in DRIVERS))],
+                       ["current_a", "velocity_rad_s"], ["drivers"])

@@ -46,10 +46,12 @@ def friction_w(m, velocity_rad_s):
 
 
 def losses_w(m, current_a, velocity_rad_s, winding_c) -> dict:
-    """The named losses a thermal network's heat sources may draw on."""
+    """The named losses and loss drivers a thermal network's heat sources may draw on (the heat a
+    source injects from them, e.g. drive or iron losses, is the network's: ``thermal.HeatSource``)."""
     return {"joule_w": joule_w(m, current_a, winding_c),
             "friction_w": friction_w(m, velocity_rad_s),
-            "current_sq_a2": current_a ** 2}
+            "current_sq_a2": current_a ** 2,
+            "speed_abs_rad_s": ca.fabs(velocity_rad_s)}
 
 
 def current_for_torque_a(m, torque_nm, velocity_rad_s=0.0):

@@ -12,31 +12,93 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+import tomli_w
+
 from ..errors import InputError
 
 THERMAL_MODELS = ("one_node", "two_node", "two_node_drive")
 
-_MOTOR_KEYS = (
-    "gear_ratio", "torque_constant_nm_per_a", "back_emf_v_s_per_rad", "resistance_ohm",
-    "resistance_ref_c", "copper_alpha_per_k", "rotor_inertia_kg_m2",
-    "viscous_friction_nm_s_per_rad", "coulomb_friction_nm", "coulomb_smoothing_rad_s",
-    "bus_voltage_v", "current_nominal_a", "current_peak_a",
-)
-# Keys that may be zero or negative (temperatures); every other number must be > 0, or >= 0 below.
-_SIGNED = {"resistance_ref_c", "ambient_c", "winding_max_c", "safety_cutoff_c"}
-_NON_NEGATIVE = {"viscous_friction_nm_s_per_rad", "coulomb_friction_nm", "copper_alpha_per_k",
-                 "drive_idle_w", "drive_loss_w_per_a2", "friction_heating_fraction"}
-_THERMAL_KEYS = {
+# --- the key catalogue: every motor, thermal and limit key of the contract, with its check ----------
+@dataclass(frozen=True)
+class Bound:
+    """Physically possible values of one key: ``low <= x <= high`` in ``unit``, and why.
+
+    The sign rule follows ``low``: > 0 keys (``low > 0``) refuse zero, >= 0 keys (``low == 0``) refuse
+    negatives, temperatures (``low < 0``) only the range."""
+
+    low: float
+    high: float
+    unit: str
+    reason: str
+
+
+_RESISTANCE_K_PER_W = Bound(1e-4, 1e4, "K/W", "a liquid-cooled housing ~0.01, a tiny part in still air ~1000")
+_CAPACITY_J_PER_K = Bound(1e-3, 1e7, "J/K", "a milligram of copper to ten tonnes of steel")
+_HEAT_W = Bound(0.0, 1e5, "W", "heat is non-negative; 100 kW is beyond any joint motor")
+_CELSIUS = Bound(-50.0, 80.0, "°C", "contract: rooms and machines between -50 and 80 °C")
+_HOT_CELSIUS = Bound(-50.0, 400.0, "°C", "above ambient; no winding insulation survives 400 °C")
+
+BOUNDS: dict[str, Bound] = {
+    # [motor]
+    "gear_ratio": Bound(0.01, 1e4, "", "direct drive is 1, strain-wave gears ~160, worm stages ~1e3"),
+    "torque_constant_nm_per_a": Bound(1e-4, 100.0, "N·m/A", "micro motors ~1e-3, large torque motors ~10"),
+    "back_emf_v_s_per_rad": Bound(1e-4, 100.0, "V·s/rad", "equals the torque constant in SI units"),
+    "resistance_ohm": Bound(1e-4, 1e3, "ohm", "large motors ~1 mohm, micro motors ~100 ohm"),
+    "resistance_ref_c": Bound(-50.0, 200.0, "°C", "datasheets quote 20-25 °C"),
+    "copper_alpha_per_k": Bound(0.0, 0.02, "1/K", "copper 0.00393, no conductor above 0.007; 0 disables R(T)"),
+    "rotor_inertia_kg_m2": Bound(1e-10, 1.0, "kg·m^2", "micro rotors ~1e-8, large servo rotors ~1e-2"),
+    "viscous_friction_nm_s_per_rad": Bound(0.0, 1e4, "N·m·s/rad", "dissipative: non-negative"),
+    "coulomb_friction_nm": Bound(0.0, 1e4, "N·m", "dissipative: non-negative"),
+    "coulomb_smoothing_rad_s": Bound(1e-6, 10.0, "rad/s", "a smoothing of sign(v), well below joint speeds"),
+    "bus_voltage_v": Bound(1.0, 1e4, "V", "from single cells to industrial drives"),
+    "current_nominal_a": Bound(1e-4, 1e4, "A", "micro motors ~10 mA, traction motors ~1 kA"),
+    "current_peak_a": Bound(1e-4, 1e4, "A", "micro motors ~10 mA, traction motors ~1 kA"),
+    # [thermal]
+    "ambient_c": _CELSIUS,
+    "capacity_j_per_k": _CAPACITY_J_PER_K, "winding_capacity_j_per_k": _CAPACITY_J_PER_K,
+    "casing_capacity_j_per_k": _CAPACITY_J_PER_K, "drive_capacity_j_per_k": _CAPACITY_J_PER_K,
+    "resistance_k_per_w": _RESISTANCE_K_PER_W, "winding_casing_k_per_w": _RESISTANCE_K_PER_W,
+    "casing_ambient_k_per_w": _RESISTANCE_K_PER_W, "drive_casing_k_per_w": _RESISTANCE_K_PER_W,
+    "drive_ambient_k_per_w": _RESISTANCE_K_PER_W,
+    "drive_idle_w": _HEAT_W,
+    "drive_loss_w_per_a2": Bound(0.0, 100.0, "W/A^2", "a resistance of the drive: non-negative, < 100 ohm"),
+    "friction_heating_fraction": Bound(0.0, 1.0, "", "a share of the friction power"),
+    "friction_heat_linear_w_s_per_rad": Bound(0.0, 1e5, "W·s/rad", "heat is non-negative"),
+    "friction_heat_quadratic_w_s2_per_rad2": Bound(0.0, 1e5, "W·s^2/rad^2", "heat is non-negative"),
+    "iron_loss_w": _HEAT_W,
+    "iron_loss_ref_speed_rad_s": Bound(1e-3, 1e4, "rad/s", "a joint speed"),
+    "iron_loss_speed_exponent": Bound(1.0, 3.0, "", "hysteresis ~ speed (1), eddy currents ~ speed^2 (2)"),
+    # [limits]
+    "winding_max_c": _HOT_CELSIUS,
+    "safety_cutoff_c": _HOT_CELSIUS,
+}
+
+THERMAL_KEYS: dict[str, tuple[str, ...]] = {
     "one_node": ("capacity_j_per_k", "resistance_k_per_w"),
     "two_node": ("winding_capacity_j_per_k", "casing_capacity_j_per_k",
                  "winding_casing_k_per_w", "casing_ambient_k_per_w"),
 }
-_THERMAL_KEYS["two_node_drive"] = _THERMAL_KEYS["two_node"] + (
+THERMAL_KEYS["two_node_drive"] = THERMAL_KEYS["two_node"] + (
     "drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w",
     "drive_idle_w", "drive_loss_w_per_a2")
-# Optional thermal keys with their defaults (extensions of the contract, documented there).
-_THERMAL_OPTIONAL = {"friction_heating_fraction": 0.0}
-_LIMIT_KEYS = ("winding_max_c", "safety_cutoff_c")
+# Optional numeric [thermal] keys, valid with any model, and their defaults (contract, plus the
+# pre-contract ``friction_heating_fraction``). A model's own key is required, not optional.
+THERMAL_OPTIONAL: dict[str, float] = {
+    "friction_heating_fraction": 0.0,
+    "friction_heat_linear_w_s_per_rad": 0.0, "friction_heat_quadratic_w_s2_per_rad2": 0.0,
+    "iron_loss_w": 0.0, "iron_loss_ref_speed_rad_s": 1.0, "iron_loss_speed_exponent": 2.0,
+    "drive_idle_w": 0.0, "drive_loss_w_per_a2": 0.0,
+}
+# Optional node choices of [thermal]: key -> (allowed nodes, default).
+THERMAL_NODE_CHOICES: dict[str, tuple[tuple[str, ...], str]] = {
+    "sensor": (("casing", "winding"), "casing"),
+    "friction_heat_node": (("winding", "casing"), "winding"),
+}
+
+
+def unit(key: str) -> str:
+    """The unit of a catalogue key (``"J/K"`` for ``casing_capacity_j_per_k``)."""
+    return BOUNDS[key].unit
 
 
 @dataclass(frozen=True)
@@ -65,20 +127,47 @@ class MotorParameters:
 
 @dataclass(frozen=True)
 class ThermalParameters:
-    """Lumped thermal network parameters; ``values`` holds the model's keys (see _THERMAL_KEYS)."""
+    """Lumped thermal network parameters: ``values`` holds the model's keys (:data:`THERMAL_KEYS`) and
+    any optional ones (:data:`THERMAL_OPTIONAL`, their defaults when absent); values may be CasADi
+    symbols (identification). ``sensor`` is the measured node, ``friction_heat_node`` where the
+    contract's friction heat enters."""
 
     model: str
     ambient_c: float
     values: Mapping[str, float]
+    sensor: str | None = None
+    friction_heat_node: str = "winding"
 
     def __getitem__(self, key: str) -> float:
-        return self.values[key]
+        if key in self.values:
+            return self.values[key]
+        return THERMAL_OPTIONAL[key]
+
+    @property
+    def sensor_node(self) -> str:
+        """The measured node: ``sensor``, by default the casing (the winding of a one-node network)."""
+        return self.sensor or ("winding" if self.model == "one_node" else "casing")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The [thermal] section: the model's keys, and optional ones that differ from their defaults."""
+        out: dict[str, Any] = {"model": self.model, "ambient_c": self.ambient_c}
+        if self.sensor is not None:
+            out["sensor"] = self.sensor
+        if self.friction_heat_node != THERMAL_NODE_CHOICES["friction_heat_node"][1]:
+            out["friction_heat_node"] = self.friction_heat_node
+        out |= {k: self.values[k] for k in THERMAL_KEYS[self.model]}
+        out |= {k: v for k, v in self.values.items() if k not in out and v != THERMAL_OPTIONAL[k]}
+        return out
 
 
 @dataclass(frozen=True)
 class Limits:
     winding_max_c: float
     safety_cutoff_c: float
+
+
+MOTOR_KEYS = tuple(f.name for f in dataclasses.fields(MotorParameters))
+LIMIT_KEYS = tuple(f.name for f in dataclasses.fields(Limits))
 
 
 @dataclass(frozen=True)
@@ -97,8 +186,7 @@ class JointParameters:
         return {
             "joint": {"name": self.joint},
             "motor": dataclasses.asdict(self.motor),
-            "thermal": {"model": self.thermal.model, "ambient_c": self.thermal.ambient_c,
-                        **dict(self.thermal.values)},
+            "thermal": self.thermal.to_dict(),
             "limits": dataclasses.asdict(self.limits),
             "sources": dict(self.sources),
         }
@@ -106,12 +194,10 @@ class JointParameters:
     def replace(self, section: str, **values: float) -> "JointParameters":
         """A copy with some values of ``motor``, ``thermal`` or ``limits`` replaced (validated)."""
         data = self.to_dict()
-        unknown = set(values) - set(data[section])
-        if section == "thermal":
-            unknown -= set(_THERMAL_OPTIONAL)
+        known = set(data[section]) | (set(THERMAL_OPTIONAL) | set(THERMAL_NODE_CHOICES) if section == "thermal" else set())
+        unknown = sorted(set(values) - known)
         if unknown:
-            raise InputError(self.path, f"{section}.{sorted(unknown)[0]}", values[sorted(unknown)[0]],
-                             "unknown key")
+            raise InputError(self.path, f"{section}.{unknown[0]}", values[unknown[0]], "unknown key")
         data[section].update(values)
         return parameters_from_dict(data, self.path)
 
@@ -126,16 +212,23 @@ def _number(source: str, key: str, value: Any) -> float:
 
 
 def _checked(source: str, section: str, key: str, value: Any) -> float:
+    """A finite number of the right sign within the key's :data:`BOUNDS`."""
     name = f"{section}.{key}"
     x = _number(source, name, value)
-    if key in _SIGNED:
-        return x
-    if key in _NON_NEGATIVE:
-        if x < 0:
-            raise InputError(source, name, x, "must be >= 0")
-    elif x <= 0:
+    b = BOUNDS[key]
+    if b.low > 0 and x <= 0:
         raise InputError(source, name, x, "must be > 0")
+    if b.low == 0 and x < 0:
+        raise InputError(source, name, x, "must be >= 0")
+    if not b.low <= x <= b.high:
+        unit = f" {b.unit}" if b.unit else ""
+        raise InputError(source, name, x, f"physically impossible: expected {b.low:g} to {b.high:g}{unit} ({b.reason})")
     return x
+
+
+def _above_ambient(source: str, key: str, value: float, ambient_c: float) -> None:
+    if value <= ambient_c:
+        raise InputError(source, key, value, f"must be above thermal.ambient_c = {ambient_c:g} °C")
 
 
 def _section(source: str, data: Mapping[str, Any], name: str) -> Mapping[str, Any]:
@@ -146,7 +239,8 @@ def _section(source: str, data: Mapping[str, Any], name: str) -> Mapping[str, An
 
 
 def _read_keys(source: str, sec: Mapping[str, Any], section: str, required: tuple[str, ...],
-               optional: Mapping[str, float] = {}, ignore: tuple[str, ...] = ()) -> dict[str, float]:
+               optional: tuple[str, ...] = (), ignore: tuple[str, ...] = ()) -> dict[str, float]:
+    """The required keys and the optional ones present, checked; unknown keys are refused."""
     for key in sec:
         if key not in required and key not in optional and key not in ignore:
             raise InputError(source, f"{section}.{key}", sec[key], "unknown key (typo?)")
@@ -155,9 +249,20 @@ def _read_keys(source: str, sec: Mapping[str, Any], section: str, required: tupl
         if key not in sec:
             raise InputError(source, f"{section}.{key}", "<missing>", "required key missing")
         out[key] = _checked(source, section, key, sec[key])
-    for key, default in optional.items():
-        out[key] = _checked(source, section, key, sec.get(key, default))
+    out |= {key: _checked(source, section, key, sec[key]) for key in optional if key in sec}
     return out
+
+
+def _node_choice(source: str, sec: Mapping[str, Any], key: str, model: str) -> str | None:
+    """An optional node name of [thermal] (None when absent); a one-node network has only the winding."""
+    if key not in sec:
+        return None
+    allowed = THERMAL_NODE_CHOICES[key][0]
+    if model == "one_node":
+        allowed = ("winding",)
+    if sec[key] not in allowed:
+        raise InputError(source, f"thermal.{key}", repr(sec[key]), f"expected one of {', '.join(allowed)} for {model}")
+    return sec[key]
 
 
 def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
@@ -167,12 +272,12 @@ def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
     if "ambient_c" not in sec:
         raise InputError(source, "thermal.ambient_c", "<missing>", "required key missing")
     ambient = _checked(source, "thermal", "ambient_c", sec["ambient_c"])
-    values = _read_keys(source, sec, "thermal", _THERMAL_KEYS[model], _THERMAL_OPTIONAL,
-                        ignore=("model", "ambient_c"))
-    if values["friction_heating_fraction"] > 1:
-        raise InputError(source, "thermal.friction_heating_fraction", values["friction_heating_fraction"],
-                         "must be within [0, 1]")
-    return ThermalParameters(model, ambient, values)
+    required = THERMAL_KEYS[model]
+    optional = tuple(k for k in THERMAL_OPTIONAL if k not in required)
+    values = _read_keys(source, sec, "thermal", required, optional,
+                        ignore=("model", "ambient_c", *THERMAL_NODE_CHOICES))
+    fric_node = _node_choice(source, sec, "friction_heat_node", model) or THERMAL_NODE_CHOICES["friction_heat_node"][1]
+    return ThermalParameters(model, ambient, values, _node_choice(source, sec, "sensor", model), fric_node)
 
 
 def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> JointParameters:
@@ -180,15 +285,17 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
     joint = _section(source, data, "joint").get("name")
     if not isinstance(joint, str) or not joint:
         raise InputError(source, "joint.name", repr(joint), "expected a joint name")
-    motor = MotorParameters(**_read_keys(source, _section(source, data, "motor"), "motor", _MOTOR_KEYS))
+    motor = MotorParameters(**_read_keys(source, _section(source, data, "motor"), "motor", MOTOR_KEYS))
     if motor.current_peak_a < motor.current_nominal_a:
         raise InputError(source, "motor.current_peak_a", motor.current_peak_a, "must be >= current_nominal_a")
-    limits = Limits(**_read_keys(source, _section(source, data, "limits"), "limits", _LIMIT_KEYS))
+    thermal = _thermal(source, _section(source, data, "thermal"))
+    limits = Limits(**_read_keys(source, _section(source, data, "limits"), "limits", LIMIT_KEYS))
+    for key in LIMIT_KEYS:
+        _above_ambient(source, f"limits.{key}", getattr(limits, key), thermal.ambient_c)
     sources = data.get("sources", {})
     if not isinstance(sources, Mapping) or not all(isinstance(v, str) for v in sources.values()):
         raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
-    return JointParameters(joint, motor, _thermal(source, _section(source, data, "thermal")),
-                           limits, dict(sources), source)
+    return JointParameters(joint, motor, thermal, limits, dict(sources), source)
 
 
 def packaged_parameter_file(name: str) -> Path:
@@ -212,20 +319,9 @@ def load_parameters(path: str | Path) -> JointParameters:
     return parameters_from_dict(data, str(path))
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    return repr(float(value))
-
-
 def dumps_parameters(params: JointParameters) -> str:
     """TOML text of a parameter set, in the contract's section order."""
-    lines = []
-    for section, values in params.to_dict().items():
-        lines.append(f"[{section}]")
-        lines += [f"{key} = {_toml_value(val)}" for key, val in values.items()]
-        lines.append("")
-    return "\n".join(lines)
+    return tomli_w.dumps(params.to_dict())
 
 
 def save_parameters(params: JointParameters, path: str | Path) -> None:

@@ -29,15 +29,38 @@ class Link:
 
 @dataclass(frozen=True)
 class HeatSource:
-    """Power ``gain * power[name] + constant_w`` injected at ``node``.
+    """Power ``gain * power[name] ** exponent + constant_w`` injected at ``node``.
 
-    ``name`` refers to a loss computed elsewhere (``joule_w``, ``friction_w``, ``current_sq_a2``).
+    ``name`` refers to a loss or loss driver of ``motor.losses_w`` (``joule_w``, ``friction_w``,
+    ``current_sq_a2``, ``speed_abs_rad_s``); ``exponent`` is a number. A caller that holds inputs
+    over an interval may pass the interval mean of ``power[name] ** exponent`` under :attr:`feature`.
     """
 
     node: str
     name: str | None
     gain: object = 1.0
     constant_w: object = 0.0
+    exponent: float = 1.0
+
+    @property
+    def feature(self) -> str | None:
+        return None if self.name is None else feature_key(self.name, self.exponent)
+
+    def power_w(self, powers: Mapping[str, object]):
+        if self.name is None:
+            return self.constant_w
+        return self.constant_w + self.gain * feature_value(powers, self.name, self.exponent)
+
+
+def feature_key(name: str, exponent: float = 1.0) -> str:
+    """Key of a source's driver ``power[name] ** exponent``: ``name``, or e.g. ``speed_abs_rad_s^2``."""
+    return name if exponent == 1 else f"{name}^{exponent:g}"
+
+
+def feature_value(powers: Mapping[str, object], name: str, exponent: float = 1.0):
+    """``powers[name] ** exponent``, or its held mean when ``powers`` has it under :func:`feature_key`."""
+    key = feature_key(name, exponent)
+    return powers[key] if key in powers else powers[name] ** exponent
 
 
 @dataclass(frozen=True)
@@ -78,18 +101,8 @@ class ThermalNetwork:
             if link.b != AMBIENT:
                 heat[link.b] = heat[link.b] + flow
         for src in self.sources:
-            inject = src.constant_w + (src.gain * powers[src.name] if src.name else 0)
-            heat[src.node] = heat[src.node] + inject
+            heat[src.node] = heat[src.node] + src.power_w(powers)
         return ca.vertcat(*[heat[n] / c for n, c in zip(self.nodes, self.capacities_j_per_k)])
-
-    def function(self, source_names: tuple[str, ...]) -> ca.Function:
-        """Named CasADi function ``thermal_rhs(temperatures_c, powers_w, ambient_c) -> dtemperatures_c_dt``."""
-        temps = ca.SX.sym("temperatures_c", len(self.nodes))
-        powers = ca.SX.sym("powers_w", len(source_names))
-        ambient = ca.SX.sym("ambient_c")
-        rhs = self.rhs(temps, {n: powers[i] for i, n in enumerate(source_names)}, ambient)
-        return ca.Function("thermal_rhs", [temps, powers, ambient], [rhs],
-                           ["temperatures_c", "powers_w", "ambient_c"], ["dtemperatures_c_dt"])
 
     def steady_state(self, powers: Mapping[str, float], ambient_c: float) -> np.ndarray:
         """Equilibrium temperatures for constant losses (the network is linear in T)."""
@@ -100,37 +113,56 @@ class ThermalNetwork:
         return np.linalg.solve(a, -b.ravel())
 
 
-def joint_heat_rhs(network: ThermalNetwork, motor_params, temperatures_c, current_a, velocity_rad_s, ambient_c):
+def joint_heat_rhs(network: ThermalNetwork, motor_params, temperatures_c, current_a, velocity_rad_s, ambient_c,
+                   held: Mapping[str, object] | None = None):
     """dT/dt of one joint's network heated by its motor's losses (R(T) at the limit node, the winding).
 
     The one place where motor losses meet a thermal network: the model, the whole-arm hold, the
-    observer and identification all call it (``motor_params`` may hold CasADi symbols)."""
+    observer and identification all call it (``motor_params`` may hold CasADi symbols). ``held``
+    replaces losses by their means over a zero-order-hold interval (keys: ``HeatSource.feature``;
+    the mean friction power of an interval is not the friction power of its mean speed)."""
     winding_c = temperatures_c[network.index(network.limit_node)]
-    losses = motor.losses_w(motor_params, current_a, velocity_rad_s, winding_c)
+    losses = motor.losses_w(motor_params, current_a, velocity_rad_s, winding_c) | dict(held or {})
     return network.rhs(temperatures_c, losses, ambient_c)
 
 
 def network_from_parameters(th: ThermalParameters) -> ThermalNetwork:
-    """The contract's three networks: one node (eq. 7), winding/casing (eq. 6), and a drive node."""
-    fric = th["friction_heating_fraction"]
+    """The contract's three networks: one node (eq. 7), winding/casing (eq. 6), and a drive node, with
+    the heat sources of the file: Joule heat in the winding; ``friction_heating_fraction`` of the
+    friction power in the casing (the winding of a one-node network); friction heat
+    c1 |v| + c2 v^2 at ``friction_heat_node``; iron losses P_Fe (|v| / v_ref)^k in the winding; the
+    drive's idle and i^2 losses in the drive node, or without one in the sensor node. Values may be
+    CasADi symbols; sources whose gain is a literal zero are left out."""
     if th.model == "one_node":
-        return ThermalNetwork(
-            nodes=("winding",), capacities_j_per_k=(th["capacity_j_per_k"],),
-            links=(Link("winding", AMBIENT, th["resistance_k_per_w"]),),
-            sources=(HeatSource("winding", "joule_w"), HeatSource("winding", "friction_w", fric)),
-            sensor_node="winding")
-    nodes = ("winding", "casing")
-    caps = (th["winding_capacity_j_per_k"], th["casing_capacity_j_per_k"])
-    links = (Link("winding", "casing", th["winding_casing_k_per_w"]),
-             Link("casing", AMBIENT, th["casing_ambient_k_per_w"]))
-    sources = (HeatSource("winding", "joule_w"), HeatSource("casing", "friction_w", fric))
+        nodes, caps = ("winding",), (th["capacity_j_per_k"],)
+        links = (Link("winding", AMBIENT, th["resistance_k_per_w"]),)
+    else:
+        nodes = ("winding", "casing")
+        caps = (th["winding_capacity_j_per_k"], th["casing_capacity_j_per_k"])
+        links = (Link("winding", "casing", th["winding_casing_k_per_w"]),
+                 Link("casing", AMBIENT, th["casing_ambient_k_per_w"]))
     if th.model == "two_node_drive":
         nodes += ("drive",)
         caps += (th["drive_capacity_j_per_k"],)
         links += (Link("drive", "casing", th["drive_casing_k_per_w"]),
                   Link("drive", AMBIENT, th["drive_ambient_k_per_w"]))
-        sources += (HeatSource("drive", "current_sq_a2", th["drive_loss_w_per_a2"], th["drive_idle_w"]),)
-    return ThermalNetwork(nodes, caps, links, sources, sensor_node="casing")
+    drive_node = "drive" if "drive" in nodes else th.sensor_node
+    exponent = float(th["iron_loss_speed_exponent"])
+    sources = (HeatSource("winding", "joule_w"),
+               HeatSource("winding" if th.model == "one_node" else "casing", "friction_w",
+                          th["friction_heating_fraction"]),
+               HeatSource(th.friction_heat_node, "speed_abs_rad_s", th["friction_heat_linear_w_s_per_rad"]),
+               HeatSource(th.friction_heat_node, "speed_abs_rad_s", th["friction_heat_quadratic_w_s2_per_rad2"],
+                          exponent=2.0),
+               HeatSource("winding", "speed_abs_rad_s", th["iron_loss_w"] / th["iron_loss_ref_speed_rad_s"] ** exponent,
+                          exponent=exponent),
+               HeatSource(drive_node, "current_sq_a2", th["drive_loss_w_per_a2"], th["drive_idle_w"]))
+    sources = tuple(s for s in sources if not (_zero(s.gain) and _zero(s.constant_w)))
+    return ThermalNetwork(nodes, caps, links, sources, sensor_node=th.sensor_node)
+
+
+def _zero(value) -> bool:
+    return isinstance(value, (int, float)) and value == 0
 
 
 @dataclass(frozen=True)

@@ -28,10 +28,10 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..model import motor
 from .._config import require
 from ..model.actuated import ActuatedArm
 from ..model.integrators import make_step, step_jacobians
+from ..model.thermal import joint_heat_rhs
 from .plant import Measurement
 from .settings import MPCSettings
 
@@ -76,8 +76,7 @@ def scaled_ode(model: ActuatedArm) -> ca.Function:
         net = dataclasses.replace(net, links=links)
         first = model.index(joint, net.state_names[0])
         temps = x[first:first + len(net.nodes)]
-        losses = motor.losses_w(model.params[joint].motor, u[k], x[n + k], temps[net.index(net.limit_node)])
-        parts.append(net.rhs(temps, losses, amb))
+        parts.append(joint_heat_rhs(net, model.params[joint].motor, temps, u[k], x[n + k], amb))
     return ca.Function("scaled_ode", [z, u, amb], [ca.vertcat(*parts, 0)], ["x", "current_a", "ambient_c"], ["xdot"])
 
 
