@@ -211,9 +211,9 @@ def _number(source: str, key: str, value: Any) -> float:
     return value
 
 
-def _checked(source: str, section: str, key: str, value: Any) -> float:
-    """A finite number of the right sign within the key's :data:`BOUNDS`."""
-    name = f"{section}.{key}"
+def checked_value(source: str, name: str, key: str, value: Any) -> float:
+    """``value`` of catalogue ``key`` (shown as ``name``) as a finite number of the right sign within
+    the key's :data:`BOUNDS`; InputError otherwise."""
     x = _number(source, name, value)
     b = BOUNDS[key]
     if b.low > 0 and x <= 0:
@@ -248,8 +248,8 @@ def _read_keys(source: str, sec: Mapping[str, Any], section: str, required: tupl
     for key in required:
         if key not in sec:
             raise InputError(source, f"{section}.{key}", "<missing>", "required key missing")
-        out[key] = _checked(source, section, key, sec[key])
-    out |= {key: _checked(source, section, key, sec[key]) for key in optional if key in sec}
+        out[key] = checked_value(source, f"{section}.{key}", key, sec[key])
+    out |= {key: checked_value(source, f"{section}.{key}", key, sec[key]) for key in optional if key in sec}
     return out
 
 
@@ -271,7 +271,7 @@ def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
         raise InputError(source, "thermal.model", repr(model), f"expected one of {', '.join(THERMAL_MODELS)}")
     if "ambient_c" not in sec:
         raise InputError(source, "thermal.ambient_c", "<missing>", "required key missing")
-    ambient = _checked(source, "thermal", "ambient_c", sec["ambient_c"])
+    ambient = checked_value(source, "thermal.ambient_c", "ambient_c", sec["ambient_c"])
     required = THERMAL_KEYS[model]
     optional = tuple(k for k in THERMAL_OPTIONAL if k not in required)
     values = _read_keys(source, sec, "thermal", required, optional,

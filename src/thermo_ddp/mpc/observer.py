@@ -29,6 +29,7 @@ import casadi as ca
 import numpy as np
 
 from .._config import require
+from ..model import motor
 from ..model.actuated import ActuatedArm
 from ..model.integrators import make_step, step_jacobians
 from ..model.thermal import joint_heat_rhs
@@ -105,7 +106,7 @@ class ExtendedKalmanFilter:
         self.z = np.zeros(self.nz)
         self.P = np.eye(self.nz)
         self.ambient_c = float(model.ambient_c)   # the room the prediction uses (the controller may move it)
-        self._motors = [model.params[j].motor for j in model.joints]
+        self._voltage = _voltage_function(model, self.nz, self._winding)
         self.monitor = CasingMonitor(settings)
         self._history: collections.deque = collections.deque(maxlen=settings.observer_delay + 1)
 
@@ -198,18 +199,12 @@ class ExtendedKalmanFilter:
         return innovation[c] / np.sqrt(np.diag(s)[c])
 
     def _voltage_rows(self, m: Measurement):
-        """V = R_ref (1 + alpha (T_w - T_ref)) i + K_b N v is linear in the state for the measured current i:
-        rows of H, the constant term and the variance (voltage noise plus R times the current noise)."""
-        n, s = self.model.nu, self.settings
-        h, offset, r = np.zeros((n, self.nz)), np.zeros(n), np.zeros(n)
-        for k, mot in enumerate(self._motors):
-            i = float(m.current_a[k])
-            h[k, self._winding[k]] = mot.resistance_ohm * mot.copper_alpha_per_k * i
-            h[k, n + k] = mot.back_emf_v_s_per_rad * mot.gear_ratio
-            offset[k] = mot.resistance_ohm * (1 - mot.copper_alpha_per_k * mot.resistance_ref_c) * i
-            ohm = mot.resistance_ohm * (1 + mot.copper_alpha_per_k * (self.z[self._winding[k]] - mot.resistance_ref_c))
-            r[k] = s.voltage_noise_v ** 2 + (ohm * s.current_noise_a) ** 2
-        return h, offset, r
+        """V = R(T_w) i + K_b N v (``motor.voltage_v``) is linear in the state for the measured current i:
+        rows of H, the constant term and the variance (voltage noise plus R(T_w) times the current noise)."""
+        s = self.settings
+        volts, h, ohm = (np.array(a, dtype=float) for a in self._voltage(self.z, np.asarray(m.current_a, float)))
+        volts, ohm = volts.ravel(), ohm.ravel()
+        return h, volts - h @ self.z, s.voltage_noise_v ** 2 + (ohm * s.current_noise_a) ** 2
 
     def filter_step(self, m: Measurement) -> list[str]:
         """Predict over the period that just ended with ``m.current_a``, check the casing sample, update
@@ -242,6 +237,17 @@ class ExtendedKalmanFilter:
         history.popleft()
         return self.monitor.innovation(nu) if nu is not None else []
 
+
+
+def _voltage_function(model: ActuatedArm, nz: int, winding: list[int]) -> ca.Function:
+    """``voltage(z, current_a) -> (voltage_v, d voltage_v / dz, resistance_ohm)`` of every joint's motor."""
+    n = model.nu
+    z, i = ca.SX.sym("z", nz), ca.SX.sym("current_a", n)
+    motors = [model.params[j].motor for j in model.joints]
+    volts = ca.vertcat(*(motor.voltage_v(m, i[k], z[n + k], z[winding[k]]) for k, m in enumerate(motors)))
+    ohm = ca.vertcat(*(motor.resistance_ohm(m, z[winding[k]]) for k, m in enumerate(motors)))
+    return ca.Function("observer_voltage", [z, i], [volts, ca.jacobian(volts, z), ohm], ["z", "current_a"],
+                       ["voltage_v", "dvoltage_dz", "resistance_ohm"])
 
 
 @dataclasses.dataclass(frozen=True)

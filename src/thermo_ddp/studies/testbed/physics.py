@@ -1,7 +1,9 @@
-"""True plant of the simulated elbow: numpy equations, scipy integration.
+"""True plant of the simulated elbow: numpy mechanics, scipy integration.
 
-Deliberately independent of the package's model code (no thermo_ddp.model.thermal / motor /
-actuated_arm, no CasADi): the diagnosis tests compare those models against this plant.
+Its mechanics are independent of the package's model (prescribed motion, inverse dynamics of a
+pendulum); its thermal network is data of the package's network type (``plant_network``) with heat
+sources the contract's models lack or place differently, so the diagnosis tests compare those models
+against a plant whose structure differs from theirs.
 
 Conventions
 - Joint angle q [rad]: 0 = forearm hanging down, positive = flexion, pi/2 = forearm
@@ -24,14 +26,19 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..._config import require
+from ...model import motor
+from ...model.parameters import BOUNDS, checked_value
+from ...model.thermal import AMBIENT, HeatSource, Link, ThermalNetwork, joint_heat_rhs
 
 Signal = Callable[[np.ndarray], np.ndarray]
 Motion = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
+# The thermal values randomised() scales (the two_node_drive keys; this order fixes the random draws).
 THERMAL_FIELDS = (
     "winding_capacity_j_per_k", "casing_capacity_j_per_k", "drive_capacity_j_per_k",
     "winding_casing_k_per_w", "casing_ambient_k_per_w", "drive_casing_k_per_w",
@@ -40,9 +47,9 @@ THERMAL_FIELDS = (
 FRICTION_FIELDS = ("viscous_friction_nm_s_per_rad", "coulomb_friction_nm")
 REGIMES = ("idle", "static", "moving", "cooling")
 IMPLICIT = ("Radau", "BDF", "LSODA")
-SIGNED_FIELDS = ("effort_offset_nm", "resistance_ref_c")
-NONNEGATIVE_FIELDS = ("copper_alpha_per_k", "drive_idle_w", "drive_loss_w_per_a2", "friction_to_winding",
-                      "forearm_inertia_kg_m2", *FRICTION_FIELDS)
+# Fields outside the parameter-file catalogue (model.parameters.BOUNDS checks the others).
+SIGNED_FIELDS = ("effort_offset_nm",)
+NONNEGATIVE_FIELDS = ("friction_to_winding", "forearm_inertia_kg_m2")
 
 
 @dataclass(frozen=True)
@@ -85,6 +92,9 @@ class PlantParameters:
             value = getattr(self, field.name)
             if field.type == "bool":
                 require(isinstance(value, bool), "PlantParameters", field.name, value, "expected a bool")
+                continue
+            if field.name in BOUNDS:
+                checked_value("PlantParameters", field.name, field.name, value)
                 continue
             require(isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value),
                     "PlantParameters", field.name, value, "expected a finite number")
@@ -321,9 +331,29 @@ class Profile:
 
 
 # ----------------------------------------------------------------------------- thermal
+def plant_network(params: PlantParameters) -> ThermalNetwork:
+    """The plant's thermal network, as data of the package's network type: winding and casing (and,
+    with ``drive_heating``, the drive node), Joule heat R(T_w) i^2 in the winding and the concealed
+    sources the baseline model lacks: friction heat split between winding and casing
+    (``friction_to_winding``), the drive's idle and i^2 losses. The sensor is on the casing."""
+    p = params
+    nodes, caps = ("winding", "casing"), (p.winding_capacity_j_per_k, p.casing_capacity_j_per_k)
+    links = (Link("winding", "casing", p.winding_casing_k_per_w), Link("casing", AMBIENT, p.casing_ambient_k_per_w))
+    sources = (HeatSource("winding", "joule_w"),)
+    if p.friction_heating:
+        sources += (HeatSource("winding", "friction_w", p.friction_to_winding),
+                    HeatSource("casing", "friction_w", 1 - p.friction_to_winding))
+    if p.drive_heating:
+        nodes, caps = nodes + ("drive",), caps + (p.drive_capacity_j_per_k,)
+        links += (Link("drive", "casing", p.drive_casing_k_per_w), Link("drive", AMBIENT, p.drive_ambient_k_per_w))
+        sources += (HeatSource("drive", "current_sq_a2", p.drive_loss_w_per_a2, p.drive_idle_w),)
+    return ThermalNetwork(nodes, caps, links, sources, sensor_node="casing")
+
+
 @dataclass(frozen=True)
-class ThermalNetwork:
-    """dT/dt = (a0 + i^2 a_i2) T + i^2 b_i2 + P_f b_f + T_room b_room + b_0, T = (winding, casing[, drive])."""
+class AffineNetwork:
+    """The plant network in numpy form for fast integration:
+    dT/dt = (a0 + i^2 a_i2) T + i^2 b_i2 + P_f b_f + T_room b_room + b_0, T = (winding, casing[, drive])."""
 
     a0: np.ndarray
     a_i2: np.ndarray
@@ -343,37 +373,20 @@ class ThermalNetwork:
                 + room_c * self.b_room + self.b_0)
 
 
-def thermal_network(params: PlantParameters) -> ThermalNetwork:
-    """Assemble the winding / casing / drive network from the parameters."""
-    p = params
-    n = len(p.node_names)
-    cap = capacities(p)
-    g_wc, g_ca = 1 / p.winding_casing_k_per_w, 1 / p.casing_ambient_k_per_w
-    conductance = np.zeros((n, n))  # heat flow i <- j per kelvin
-    conductance[0, 1] = conductance[1, 0] = g_wc
-    to_room = np.zeros(n)
-    to_room[1] = g_ca
-    b_0 = np.zeros(n)
-    b_i2 = np.zeros(n)
-    # Joule R(T_w) i^2 = R (1 - alpha T_ref) i^2 + R alpha i^2 T_w (report eqs. 3, 5)
-    b_i2[0] = p.resistance_ohm * (1 - p.copper_alpha_per_k * p.resistance_ref_c)
-    a_i2 = np.zeros((n, n))
-    a_i2[0, 0] = p.resistance_ohm * p.copper_alpha_per_k / cap[0]
-    b_f = np.zeros(n)
-    if p.friction_heating:
-        b_f[:2] = p.friction_to_winding, 1 - p.friction_to_winding
-    if p.drive_heating:
-        conductance[1, 2] = conductance[2, 1] = 1 / p.drive_casing_k_per_w
-        to_room[2] = 1 / p.drive_ambient_k_per_w
-        b_0[2] = p.drive_idle_w
-        b_i2[2] = p.drive_loss_w_per_a2
-    a0 = (conductance - np.diag(conductance.sum(axis=1) + to_room)) / cap[:, None]
-    return ThermalNetwork(a0, a_i2, b_i2 / cap, b_f / cap, to_room / cap, b_0 / cap)
-
-
-def capacities(params: PlantParameters) -> np.ndarray:
-    caps = [params.winding_capacity_j_per_k, params.casing_capacity_j_per_k, params.drive_capacity_j_per_k]
-    return np.array(caps[: len(params.node_names)])
+def thermal_network(params: PlantParameters) -> AffineNetwork:
+    """The coefficients of :func:`plant_network` heated by the plant's motor (``joint_heat_rhs``), which
+    is affine in T for given i^2, friction power P_f and room temperature, and affine in each of them."""
+    net = plant_network(params)
+    temps, current, friction, room = (ca.SX.sym(name, size) for name, size in
+                                      (("temperatures_c", len(net.nodes)), ("current_a", 1), ("friction_w", 1),
+                                       ("room_c", 1)))
+    rhs = joint_heat_rhs(net, params, temps, current, 0.0, room, held={"friction_w": friction})
+    f = ca.Function("plant_thermal", [current, friction, room], [ca.jacobian(rhs, temps),
+                                                                 ca.substitute(rhs, temps, ca.DM.zeros(len(net.nodes)))])
+    (a0, b_0), (a1, b_1), (_, b_f), (_, b_room) = ([np.array(m, dtype=float) for m in f(*inputs)]
+                                                  for inputs in ((0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)))
+    b_0 = b_0.ravel()
+    return AffineNetwork(a0, a1 - a0, b_1.ravel() - b_0, b_f.ravel() - b_0, b_room.ravel() - b_0, b_0)
 
 
 @dataclass(frozen=True)
@@ -416,17 +429,15 @@ class PlantSolution:
 
     def heat_flows(self, t: np.ndarray) -> HeatFlows:
         p, t = self.params, np.atleast_1d(np.asarray(t, float)).ravel()
-        temps, mech = self.temperatures(t), self.profile.mechanics(p, t)
-        i2 = mech.current_a**2
-        resistance = p.resistance_ohm * (1 + p.copper_alpha_per_k * (temps[0] - p.resistance_ref_c))
-        friction = mech.friction_w if p.friction_heating else np.zeros_like(t)
+        temps, mech, net = self.temperatures(t), self.profile.mechanics(p, t), plant_network(self.params)
+        powers = {"joule_w": motor.joule_w(p, mech.current_a, temps[0]), "friction_w": mech.friction_w,
+                  "current_sq_a2": mech.current_a**2}
+        heat = {name: np.zeros_like(t) for name in powers}
+        for src in net.sources:
+            heat[src.name] = heat[src.name] + src.power_w(powers)
         room = self.ambient(t)
-        out = (temps[1] - room) / p.casing_ambient_k_per_w
-        drive = np.zeros_like(t)
-        if p.drive_heating:
-            drive = p.drive_idle_w + p.drive_loss_w_per_a2 * i2
-            out = out + (temps[2] - room) / p.drive_ambient_k_per_w
-        return HeatFlows(resistance * i2, friction, drive, out)
+        out = sum((temps[net.index(link.a)] - room) / link.resistance_k_per_w for link in net.links if link.b == AMBIENT)
+        return HeatFlows(heat["joule_w"], heat["friction_w"], heat["current_sq_a2"], out)
 
 
 def steady_state(params: PlantParameters, current_a: float, friction_w: float, ambient_c: float) -> np.ndarray:
