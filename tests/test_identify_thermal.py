@@ -196,3 +196,21 @@ def test_thermometry_uses_only_loaded_and_still_samples():
     assert np.all(np.isnan(grid.winding_c[~used]))
     off = thermal_grid(rec, ELBOW, ThermalSettings(voltage_thermometry=False))
     assert off.winding_c is None and off.thermometry_samples == 0
+
+
+def test_iron_losses_are_written_as_the_contract_iron_loss_the_planner_uses():
+    """The fitted k v^2 becomes iron_loss_w = k at 1 rad/s, exponent 2: the planner's network then injects
+    exactly k v^2 in the winding (and the identification's structure is that network)."""
+    from types import SimpleNamespace
+
+    from thermo_ddp.identify.thermal import IRON_KEY, parameter_file
+    from thermo_ddp.model.thermal import network_from_parameters
+    model = ThermalModel(ELBOW, ("casing_node", "iron_losses"))
+    values = {k: ELBOW.thermal[k] for k in model.keys if k != IRON_KEY} | {IRON_KEY: 0.03}
+    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name)
+    written = parameters_from_dict(parameter_file(ELBOW, fit, ("rec",)))
+    assert written.thermal["iron_loss_w"] == 0.03 and written.thermal["iron_loss_speed_exponent"] == 2.0
+    iron = [s for s in network_from_parameters(written.thermal).sources if s.name == "speed_abs_rad_s"]
+    assert len(iron) == 1 and iron[0].node == "winding"
+    assert iron[0].power_w({"speed_abs_rad_s": 2.5}) == pytest.approx(0.03 * 2.5 ** 2, rel=1e-15)
+    assert "identified" in written.sources["iron_loss_w"]

@@ -85,3 +85,74 @@ def test_model_composition_wires_joule_heat_to_the_winding(one_node):
     expected = 26.0 + resp.gain_k * (1 - np.exp(-traj.time_s / resp.time_constant_s))
     assert np.abs(traj["q_rad"][:, 0] - q[0]).max() < 1e-6
     assert np.abs(traj["winding_c"][:, 0] - expected).max() < 1e-3
+
+
+# --- optional [thermal] keys: heat the contract adds to any network -------------------------------
+TWO_NODE = {"model": "two_node", "ambient_c": 26.0, "winding_capacity_j_per_k": 40.0, "casing_capacity_j_per_k": 1200.0,
+            "winding_casing_k_per_w": 0.9, "casing_ambient_k_per_w": 1.3}
+
+
+def _with_thermal(elbow_file, thermal):
+    data = load_parameters(elbow_file).to_dict()
+    data["thermal"] = dict(thermal)
+    return parameters_from_dict(data)
+
+
+def _model_steady_state(params, velocity_rad_s, current_a=0.0):
+    """Node temperatures where the planner's ODE has no thermal rate at a held velocity and current
+    (its thermal rows are affine in the temperatures)."""
+    model = ActuatedArm.from_parameters(ArmSettings(), {"arm_left_4_joint": params})
+    nt = model.nx - 2
+
+    def rate(temps):
+        return np.array(model.ode(np.concatenate([[-1.0, velocity_rad_s], temps]), [current_a], 26.0)).ravel()[2:]
+    b = rate(np.zeros(nt))
+    a = np.column_stack([rate(e) - b for e in np.eye(nt)])
+    return np.linalg.solve(a, -b)
+
+
+@pytest.mark.parametrize("node", ["winding", "casing"])
+def test_friction_heat_at_constant_speed_settles_at_the_resistor_chain_value(elbow_file, node):
+    c1, c2, v = 0.8, 0.5, -1.5
+    p = _with_thermal(elbow_file, TWO_NODE | {"friction_heat_linear_w_s_per_rad": c1,
+                                              "friction_heat_quadratic_w_s2_per_rad2": c2, "friction_heat_node": node})
+    heat = c1 * abs(v) + c2 * v ** 2
+    casing = 26.0 + 1.3 * heat
+    winding = casing + (0.9 * heat if node == "winding" else 0.0)
+    assert np.allclose(_model_steady_state(p, v), [winding, casing], rtol=1e-12)
+
+
+def test_iron_loss_follows_its_speed_law_in_the_winding(elbow_file):
+    p = _with_thermal(elbow_file, ONE_NODE | {"iron_loss_w": 3.0, "iron_loss_ref_speed_rad_s": 2.0,
+                                              "iron_loss_speed_exponent": 1.5})
+    for v in (2.0, -4.0, 0.0):
+        heat = 3.0 * (abs(v) / 2.0) ** 1.5
+        assert _model_steady_state(p, v)[0] == pytest.approx(26.0 + 1.8 * heat, rel=1e-12)
+
+
+@pytest.mark.parametrize("sensor", ["casing", "winding"])
+def test_drive_losses_without_a_drive_node_heat_the_sensor_node(elbow_file, sensor):
+    p = _with_thermal(elbow_file, TWO_NODE | {"drive_idle_w": 10.0, "drive_loss_w_per_a2": 0.2, "sensor": sensor})
+    net = network_from_parameters(p.thermal)
+    assert net.sensor_node == sensor
+    heat = 10.0 + 0.2 * 3.0 ** 2
+    joule = motor.joule_w(p.motor, 3.0, 26.0)  # held as a constant power here
+    t = net.steady_state({"joule_w": joule, "current_sq_a2": 9.0, "friction_w": 0.0, "speed_abs_rad_s": 0.0}, 26.0)
+    casing = 26.0 + 1.3 * (heat + joule)
+    assert t[1] == pytest.approx(casing, rel=1e-12)
+    assert t[0] == pytest.approx(casing + 0.9 * (joule + (heat if sensor == "winding" else 0.0)), rel=1e-12)
+
+
+def test_defaults_add_no_heat_source(elbow_file):
+    """Absent optional keys leave today's networks as they were: Joule heat and, with a drive, its losses."""
+    net = network_from_parameters(load_parameters(elbow_file).thermal)
+    assert [(s.node, s.name) for s in net.sources] == [("winding", "joule_w"), ("drive", "current_sq_a2")]
+
+
+def test_identification_sees_the_files_optional_heat(elbow_file):
+    """A structure fitted from a file keeps its optional heat sources: the network is the planner's."""
+    from thermo_ddp.identify.thermal import ThermalModel
+    p = _with_thermal(elbow_file, TWO_NODE | {"friction_heat_linear_w_s_per_rad": 0.7, "friction_heat_node": "casing"})
+    fit_net = ThermalModel(p, ("casing_node",)).network
+    assert fit_net.sources == network_from_parameters(p.thermal).sources
+    assert HeatSource("casing", "speed_abs_rad_s", 0.7) in fit_net.sources

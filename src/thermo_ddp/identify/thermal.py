@@ -150,9 +150,9 @@ def structure_parameters(th: ThermalParameters, model: str, values: Mapping[str,
     own["friction_heating_fraction"] = values.get("friction_heating_fraction", 0.0)
     if IRON_KEY in values:
         own |= {"iron_loss_w": values[IRON_KEY], **_IRON_CONTRACT}
-    sensor = th.sensor if model != "one_node" else None
-    return dataclasses.replace(th, model=model, values=kept | own, sensor=sensor,
-                               friction_heat_node=th.friction_heat_node if model != "one_node" else "winding")
+    if model == "one_node":  # a one-node network has only the winding
+        return dataclasses.replace(th, model=model, values=kept | own, sensor=None, friction_heat_node=None)
+    return dataclasses.replace(th, model=model, values=kept | own)
 
 
 def start_values(params: JointParameters, terms: Sequence[str],

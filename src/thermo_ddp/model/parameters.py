@@ -128,15 +128,15 @@ class MotorParameters:
 @dataclass(frozen=True)
 class ThermalParameters:
     """Lumped thermal network parameters: ``values`` holds the model's keys (:data:`THERMAL_KEYS`) and
-    any optional ones (:data:`THERMAL_OPTIONAL`, their defaults when absent); values may be CasADi
-    symbols (identification). ``sensor`` is the measured node, ``friction_heat_node`` where the
-    contract's friction heat enters."""
+    the optional ones given (:data:`THERMAL_OPTIONAL`; absent ones read as their defaults); values may
+    be CasADi symbols (identification). ``sensor`` and ``friction_heat_node`` are the optional node
+    choices (None: absent, see :data:`THERMAL_NODE_CHOICES`)."""
 
     model: str
     ambient_c: float
     values: Mapping[str, float]
     sensor: str | None = None
-    friction_heat_node: str = "winding"
+    friction_heat_node: str | None = None
 
     def __getitem__(self, key: str) -> float:
         if key in self.values:
@@ -146,18 +146,17 @@ class ThermalParameters:
     @property
     def sensor_node(self) -> str:
         """The measured node: ``sensor``, by default the casing (the winding of a one-node network)."""
-        return self.sensor or ("winding" if self.model == "one_node" else "casing")
+        return self.sensor or ("winding" if self.model == "one_node" else THERMAL_NODE_CHOICES["sensor"][1])
+
+    @property
+    def friction_node(self) -> str:
+        """Where the contract's friction heat enters: ``friction_heat_node``, by default the winding."""
+        return self.friction_heat_node or THERMAL_NODE_CHOICES["friction_heat_node"][1]
 
     def to_dict(self) -> dict[str, Any]:
-        """The [thermal] section: the model's keys, and optional ones that differ from their defaults."""
-        out: dict[str, Any] = {"model": self.model, "ambient_c": self.ambient_c}
-        if self.sensor is not None:
-            out["sensor"] = self.sensor
-        if self.friction_heat_node != THERMAL_NODE_CHOICES["friction_heat_node"][1]:
-            out["friction_heat_node"] = self.friction_heat_node
-        out |= {k: self.values[k] for k in THERMAL_KEYS[self.model]}
-        out |= {k: v for k, v in self.values.items() if k not in out and v != THERMAL_OPTIONAL[k]}
-        return out
+        """The [thermal] section: model, ambient, the node choices and values given."""
+        choices = {k: getattr(self, k) for k in THERMAL_NODE_CHOICES if getattr(self, k) is not None}
+        return {"model": self.model, "ambient_c": self.ambient_c, **choices, **self.values}
 
 
 @dataclass(frozen=True)
@@ -276,8 +275,7 @@ def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
     optional = tuple(k for k in THERMAL_OPTIONAL if k not in required)
     values = _read_keys(source, sec, "thermal", required, optional,
                         ignore=("model", "ambient_c", *THERMAL_NODE_CHOICES))
-    fric_node = _node_choice(source, sec, "friction_heat_node", model) or THERMAL_NODE_CHOICES["friction_heat_node"][1]
-    return ThermalParameters(model, ambient, values, _node_choice(source, sec, "sensor", model), fric_node)
+    return ThermalParameters(model, ambient, values, *(_node_choice(source, sec, k, model) for k in THERMAL_NODE_CHOICES))
 
 
 def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> JointParameters:
