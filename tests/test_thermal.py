@@ -120,6 +120,8 @@ def test_friction_heat_at_constant_speed_settles_at_the_resistor_chain_value(elb
     casing = 26.0 + 1.3 * heat
     winding = casing + (0.9 * heat if node == "winding" else 0.0)
     assert np.allclose(_model_steady_state(p, v), [winding, casing], rtol=1e-12)
+    model = ActuatedArm.from_parameters(ArmSettings(), {"arm_left_4_joint": p})
+    assert np.allclose(model.idle_temperatures(), 26.0)  # at rest the friction heat is off
 
 
 def test_iron_loss_follows_its_speed_law_in_the_winding(elbow_file):

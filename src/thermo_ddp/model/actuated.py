@@ -101,8 +101,8 @@ class ActuatedArm:
     def idle_temperatures(self, ambient_c: float | None = None) -> np.ndarray:
         """Steady temperatures of every node with no current and no motion (drive idle heat)."""
         amb = self.ambient_c if ambient_c is None else ambient_c
-        zero = {"joule_w": 0.0, "friction_w": 0.0, "current_sq_a2": 0.0}
-        return np.concatenate([self.networks[j].steady_state(zero, amb) for j in self.joints])
+        return np.concatenate([self.networks[j].steady_state(motor.losses_w(self.params[j].motor, 0.0, 0.0, amb), amb)
+                               for j in self.joints])
 
     def state(self, q=None, v=None, temperatures_c=None) -> np.ndarray:
         """A state vector; defaults: q = 0 (arm hanging), v = 0, the idle temperatures."""
