@@ -47,6 +47,15 @@ def _loop(args) -> int:
     return 0
 
 
+def _cache(args) -> int:
+    from . import codegen
+    if args.clear:
+        print(f"removed {codegen.clear_cache()} files from {codegen.cache_dir()}")
+    if args.info or not args.clear:
+        print(codegen.cache_info().report())
+    return 0
+
+
 def _write_json(data: dict, path: str | None) -> None:
     text = json.dumps(data, indent=2)
     if path is None:
@@ -85,45 +94,62 @@ class _Parser(argparse.ArgumentParser):
 
 def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns)")
-    cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal")
-    cmd.add_argument("--json", metavar="OUT", help="write the result here (default: stdout)")
+    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns); required")
+    cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal",
+                     help="which physics to model (default %(default)s)")
+    cmd.add_argument("--json", metavar="OUT", help="write the result JSON here (default: stdout)")
     if plot:
-        cmd.add_argument("--plot", metavar="OUT.png", help="write the diagnosis figure here")
+        cmd.add_argument("--plot", metavar="OUT.png", help="write the diagnosis figure here (default: none)")
     return cmd
 
 
 def _demo_parser() -> _Parser:
     demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
                                                        "current and winding heating")
-    demo.add_argument("--payload-kg", type=float, default=40.0)
-    demo.add_argument("--hold-s", type=float, default=60.0)
+    demo.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
+    demo.add_argument("--hold-s", type=float, default=60.0, help="duration of the hold, s (default %(default)s)")
     return demo
 
 
 def _plan_parser(name: str, description: str) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("--payload-kg", type=float, default=40.0)
-    cmd.add_argument("--hold-s", type=float, default=30.0, help="requested hold at the goal (default 30 s)")
-    cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp")
+    cmd.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
+    cmd.add_argument("--hold-s", type=float, default=30.0, help="requested hold at the goal, s (default %(default)s)")
+    cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
+                     help="solver of the transcribed problem (default %(default)s)")
     if name == "plan":
-        cmd.add_argument("--limit-c", type=float, default=84.0, help="winding limit (default 84 °C)")
-        cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default models/arm_left_4_joint.toml)")
-        cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here")
-        cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here")
+        cmd.add_argument("--limit-c", type=float, default=84.0, help="winding limit, °C (default %(default)s)")
+        cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default: the packaged "
+                                                         "models/arm_left_4_joint.toml)")
+        cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
+        cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
     else:
-        cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0])
+        cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0],
+                         help="winding limits to compare, °C (default %(default)s)")
     return cmd
 
 
 def _loop_parser() -> _Parser:
     cmd = _Parser(prog="thermo-ddp loop", description="recordings -> identification -> diagnosis -> improved "
                   "model -> plan -> closed loop, original vs improved model, on the simulated elbow")
-    cmd.add_argument("--out", default="loop_out", help="output folder (default loop_out)")
-    cmd.add_argument("--short", action="store_true", help="30-minute experiments and a 45 s hold")
-    cmd.add_argument("--hold-s", type=float, default=None)
-    cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0])
-    cmd.add_argument("--no-oracle", action="store_true", help="skip the run planned with the true parameters")
+    cmd.add_argument("--out", default="loop_out", help="output folder (default %(default)s)")
+    cmd.add_argument("--short", action="store_true", help="flag: 30-minute experiments and a 45 s hold")
+    cmd.add_argument("--hold-s", type=float, default=None,
+                     help="requested hold at the goal, s (default: LoopSettings.hold_s; --short shortens it)")
+    cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0],
+                     help="winding limits, °C (default %(default)s)")
+    cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters")
+    return cmd
+
+
+def _cache_parser() -> _Parser:
+    from .codegen import DEFAULT_CACHE_MAX_MB
+    cmd = _Parser(prog="thermo-ddp cache", description="the compiled-library cache: $THERMO_DDP_CACHE (default "
+                  f"~/.cache/thermo_ddp), capped at $THERMO_DDP_CACHE_MAX_MB (default {DEFAULT_CACHE_MAX_MB:g} MB; "
+                  "least recently used libraries are removed after a build)")
+    cmd.add_argument("--clear", action="store_true", help="flag: remove the compiled libraries (nothing else)")
+    cmd.add_argument("--info", action="store_true", help="flag: print the folder, libraries and size "
+                                                         "(what the command does without flags)")
     return cmd
 
 
@@ -135,15 +161,20 @@ COMMANDS = {
     "identify": (lambda: _recording_parser("identify", "identify parameters from recordings", False), _identify),
     "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "
                                                        "physics, refit and validate", True), _diagnose),
+    "cache": (_cache_parser, _cache),
 }
 
 
-def main(argv: list[str] | None = None) -> int:
+def top_parser() -> _Parser:
     top = _Parser(prog="thermo-ddp", description=__doc__)
-    top.add_argument("-v", "--verbose", action="store_true", help="log progress (INFO)")
-    top.add_argument("command", choices=sorted(COMMANDS))
+    top.add_argument("-v", "--verbose", action="store_true", help="flag: log progress (INFO)")
+    top.add_argument("command", choices=sorted(COMMANDS), help="required: one of %(choices)s")
     top.add_argument("args", nargs=argparse.REMAINDER, help="the command's arguments (see COMMAND --help)")
-    ns = top.parse_args(argv)
+    return top
+
+
+def main(argv: list[str] | None = None) -> int:
+    ns = top_parser().parse_args(argv)
     make_parser, run = COMMANDS[ns.command]
     args = make_parser().parse_intermixed_args(ns.args)
     logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")

@@ -3,27 +3,137 @@
 The library's name is a hash of the functions' serialisation, the CasADi version and the compiler
 flags (and the CPU when the flags say -march=native), so a changed model or option never loads a
 stale library. Cache folder: ``$THERMO_DDP_CACHE`` or ``~/.cache/thermo_ddp``.
+
+The cache is bounded: after a build pushes the libraries over ``$THERMO_DDP_CACHE_MAX_MB`` (default
+2000), the least recently used ones are removed. Each use stamps a library's access time (its
+modification time stays the build's) just before loading it. Removal cannot break a process that
+has already loaded a library (on POSIX the mapping keeps the unlinked file alive); the only window is
+between finding a file and loading it, so eviction skips every library used in the last
+``EVICTION_GRACE_S`` seconds, and a loader that finds its library gone builds it again.
 """
 from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import os
 import platform
 import shutil
 import subprocess
 import tempfile
+import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
 import casadi as ca
 
+from .errors import InputError
+
 log = logging.getLogger(__name__)
 DEFAULT_FLAGS = ("-O2",)
+DEFAULT_CACHE_MAX_MB = 2000.0
+EVICTION_GRACE_S = 60.0  # far longer than finding and loading a library takes
+_LIBRARY_GLOB = "*_" + "[0-9a-f]" * 20 + ".so"  # what library_path names; nothing else is removed
+_INDEX_GLOB = "ddp_passes_*.txt"  # solvers' index of compiled passes (see solvers/_pass_cache.py)
 
 
 def cache_dir() -> Path:
     return Path(os.environ.get("THERMO_DDP_CACHE", Path.home() / ".cache" / "thermo_ddp"))
+
+
+def cache_max_bytes() -> int:
+    """The size cap of the cache, from ``$THERMO_DDP_CACHE_MAX_MB`` (MB = 10^6 bytes)."""
+    text = os.environ.get("THERMO_DDP_CACHE_MAX_MB", str(DEFAULT_CACHE_MAX_MB))
+    try:
+        mb = float(text)
+    except ValueError:
+        mb = -1.0
+    if not (math.isfinite(mb) and mb >= 0):
+        raise InputError("environment", "THERMO_DDP_CACHE_MAX_MB", text, "expected a size in MB >= 0")
+    return int(mb * 1e6)
+
+
+def _libraries(folder: Path) -> list[tuple[Path, os.stat_result]]:
+    """The cached libraries and their status (files removed meanwhile by another process left out)."""
+    found = []
+    for lib in sorted(folder.glob(_LIBRARY_GLOB)):
+        try:
+            found.append((lib, lib.stat()))
+        except FileNotFoundError:
+            continue
+    return found
+
+
+def use_library(library: Path) -> bool:
+    """Stamp ``library`` as used now (access time; the build's modification time is kept) before
+    loading it; False when it is not in the cache."""
+    try:
+        os.utime(library, ns=(time.time_ns(), library.stat().st_mtime_ns))
+    except FileNotFoundError:
+        return False
+    return True
+
+
+def _remove(path: Path) -> bool:
+    """Remove one cache file by rename-then-unlink, so a loader sees the whole file or none and two
+    processes trimming at once never both count it; False when another process removed it first."""
+    doomed = path.with_name(f".{path.name}.{os.getpid()}.removed")
+    try:
+        os.replace(path, doomed)
+    except FileNotFoundError:
+        return False
+    doomed.unlink()
+    return True
+
+
+def trim_cache(max_bytes: int | None = None, keep: Path | None = None) -> list[Path]:
+    """Remove least recently used libraries until the cache holds at most ``max_bytes`` (default
+    :func:`cache_max_bytes`). ``keep`` and libraries used within ``EVICTION_GRACE_S`` stay.
+    Returns the removed paths."""
+    max_bytes = cache_max_bytes() if max_bytes is None else max_bytes
+    entries = _libraries(cache_dir())
+    total = sum(st.st_size for _, st in entries)
+    recent = time.time_ns() - int(EVICTION_GRACE_S * 1e9)
+    removed = []
+    for lib, st in sorted(entries, key=lambda e: e[1].st_atime_ns):
+        if total <= max_bytes:
+            break
+        if lib == keep or st.st_atime_ns > recent:
+            continue
+        if _remove(lib):
+            removed.append(lib)
+        total -= st.st_size
+    if removed:
+        log.info("cache over %.0f MB: removed %d least recently used libraries", max_bytes / 1e6, len(removed))
+    return removed
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """What the cache folder holds."""
+    folder: Path
+    libraries: int
+    size_bytes: int
+    max_bytes: int
+
+    def report(self) -> str:
+        return (f"cache folder: {self.folder}\n"
+                f"libraries: {self.libraries}\n"
+                f"size: {self.size_bytes / 1e6:.1f} MB (cap {self.max_bytes / 1e6:.0f} MB, THERMO_DDP_CACHE_MAX_MB)")
+
+
+def cache_info() -> CacheInfo:
+    libraries = _libraries(cache_dir())
+    return CacheInfo(cache_dir(), len(libraries), sum(st.st_size for _, st in libraries), cache_max_bytes())
+
+
+def clear_cache() -> int:
+    """Remove every library (and the solvers' index of them) from the cache folder, nothing else;
+    returns how many files were removed. Processes that already loaded a library keep running."""
+    folder = cache_dir()
+    files = [lib for lib, _ in _libraries(folder)] + sorted(folder.glob(_INDEX_GLOB))
+    return sum(_remove(path) for path in files)
 
 
 def _host_tag() -> str:
@@ -58,20 +168,25 @@ def compile_functions(functions: Mapping[str, ca.Function], flags=DEFAULT_FLAGS)
     if cc is None:
         raise RuntimeError("code generation needs a C compiler (gcc); none found")
     library = library_path(functions, flags)
-    if not library.exists():
-        library.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
-            source = library.with_suffix(".c").name
-            gen = ca.CodeGenerator(source, {"with_header": False})
-            for name in sorted(functions):
-                gen.add(functions[name])
-            gen.generate(tmp + os.sep)
-            built = Path(tmp) / library.name
-            log.info("compiling %s with %s %s", source, cc, " ".join(flags))
-            subprocess.run([cc, *flags, "-shared", "-fPIC", "-o", str(built), str(Path(tmp) / source), "-lm"],
-                           check=True, capture_output=True)
-            os.replace(built, library)  # atomic: concurrent builders never see half a library
+    if not use_library(library):
+        _build(functions, library, cc, flags)
+        trim_cache(keep=library)
     return {name: ca.external(f.name(), str(library)) for name, f in functions.items()}
+
+
+def _build(functions: Mapping[str, ca.Function], library: Path, cc: str, flags) -> None:
+    library.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
+        source = library.with_suffix(".c").name
+        gen = ca.CodeGenerator(source, {"with_header": False})
+        for name in sorted(functions):
+            gen.add(functions[name])
+        gen.generate(tmp + os.sep)
+        built = Path(tmp) / library.name
+        log.info("compiling %s with %s %s", source, cc, " ".join(flags))
+        subprocess.run([cc, *flags, "-shared", "-fPIC", "-o", str(built), str(Path(tmp) / source), "-lm"],
+                       check=True, capture_output=True)
+        os.replace(built, library)  # atomic: concurrent builders never see half a library
 
 
 def compiled(fn: ca.Function, flags=DEFAULT_FLAGS) -> ca.Function:

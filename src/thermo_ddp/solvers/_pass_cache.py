@@ -57,7 +57,7 @@ def load(k: str | None) -> dict[str, ca.Function] | None:
         return None
     library, *names = _index(k).read_text().split()
     library = codegen.cache_dir() / library
-    if not library.exists():
+    if not codegen.use_library(library):
         return None
     return {name: ca.external(fname, str(library)) for name, fname in zip(names[::2], names[1::2])}
 
