@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import InputError
+from .tasks._common import DEFAULT_HOLD_S
 
 
 def _demo(args) -> int:
@@ -32,7 +33,8 @@ def _plan(args) -> int:
 
 def _compare(args) -> int:
     from .tasks.lift import compare_limits
-    print(compare_limits(args.payload_kg, tuple(args.limits_c), args.hold_s, solver=args.solver).table())
+    limits = tuple(args.limits_c) if args.limits_c else None
+    print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver).table())
     return 0
 
 
@@ -97,22 +99,25 @@ def _demo_parser() -> _Parser:
     demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
                                                        "current and winding heating")
     demo.add_argument("--payload-kg", type=float, default=40.0)
-    demo.add_argument("--hold-s", type=float, default=60.0)
+    demo.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S)
     return demo
 
 
 def _plan_parser(name: str, description: str) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
     cmd.add_argument("--payload-kg", type=float, default=40.0)
-    cmd.add_argument("--hold-s", type=float, default=30.0, help="requested hold at the goal (default 30 s)")
+    cmd.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S,
+                     help=f"requested hold at the goal (default {DEFAULT_HOLD_S:g} s)")
     cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp")
     if name == "plan":
-        cmd.add_argument("--limit-c", type=float, default=84.0, help="winding limit (default 84 °C)")
+        cmd.add_argument("--limit-c", type=float, default=None,
+                         help="winding limit (default: the model file's [limits] safety_cutoff_c, 84 °C for the elbow)")
         cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default models/arm_left_4_joint.toml)")
         cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here")
         cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here")
     else:
-        cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0])
+        cmd.add_argument("--limits-c", type=float, nargs="+", default=None,
+                         help="winding limits (default: the elbow file's safety_cutoff_c and winding_max_c)")
     return cmd
 
 
