@@ -119,3 +119,17 @@ def test_cli_compare_prints_one_row_per_limit(capsys):
     assert [r[0] for r in rows] == ["84", "140"]
     holds = {r[0]: float(r[2]) for r in rows}
     assert holds["84"] < 15.0 <= holds["140"] and rows[1][1] == "True"
+
+
+def test_default_limit_and_hold_have_one_home(tmp_path, elbow_file):
+    """No limit given: the elbow file's cut-off (another file, another limit); the hold: DEFAULT_HOLD_S."""
+    from thermo_ddp.model.parameters import load_parameters, save_parameters
+    from thermo_ddp.tasks._common import DEFAULT_HOLD_S, limit_pair_c
+
+    params = load_parameters(elbow_file)
+    assert build_lift_problem(LiftSettings(hold_s=1.0)).settings.limit_c == params.limits.safety_cutoff_c == 84.0
+    assert limit_pair_c(params) == (84.0, 140.0)
+    path = tmp_path / "cutoff_70.toml"
+    save_parameters(params.replace("limits", safety_cutoff_c=70.0), path)
+    assert build_lift_problem(LiftSettings(hold_s=1.0, parameter_file=str(path))).settings.limit_c == 70.0
+    assert LiftSettings().hold_s == DEFAULT_HOLD_S

@@ -13,9 +13,11 @@ from thermo_ddp.model.actuated import load_model, model_from_dict
 from thermo_ddp.model.arm import ELBOW, LEFT_ARM
 from thermo_ddp.errors import InputError
 from thermo_ddp.recordings import TopicMap, read_bag_joints
-from thermo_ddp.tasks.whole_arm import (WholeArmSettings, evaluate_posture, gravity_torque_function, hold_temperatures,
-                                  monitor_bag, naive_posture, optimal_posture, payload_point_function, plan_whole_arm,
-                                  static_current_function, winding_indices, _posture_nlp)
+from thermo_ddp.monitor import monitor_bag
+from thermo_ddp.tasks._common import hold_temperatures, winding_indices
+from thermo_ddp.tasks.posture import (evaluate_posture, gravity_torque_function, naive_posture, optimal_posture,
+                                      payload_point_function, static_current_function, _posture_nlp)
+from thermo_ddp.tasks.whole_arm import WholeArmSettings, plan_whole_arm
 
 SHOULDER_ELBOW = ("arm_left_2_joint", ELBOW)
 UPPER_ARM = LEFT_ARM[:4]
@@ -109,9 +111,10 @@ def test_two_joint_posture_optimum_matches_a_grid_search():
 # ---------- DDP plans ----------
 
 def _check_plan_limits(plan, tol=1e-4):
-    model, s = plan.model, plan.settings
-    pm = model.arm.model
-    assert np.all(plan.series("winding_c") <= s.limit_c + tol)
+    model, pm = plan.model, plan.model.arm.model
+    limits = np.array([plan.limits_c[j] for j in model.joints])  # each joint's file: the 84 °C cut-off
+    np.testing.assert_array_equal(limits, [model.params[j].limits.safety_cutoff_c for j in model.joints])
+    assert np.all(plan.series("winding_c") <= limits + tol)
     peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
     assert np.all(np.abs(plan.us) <= peak + tol)
     q, v = plan.series("q_rad"), plan.series("v_rad_s")

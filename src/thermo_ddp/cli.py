@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .errors import InputError
+from .tasks._common import DEFAULT_HOLD_S
 
 
 def _demo(args) -> int:
@@ -32,7 +33,8 @@ def _plan(args) -> int:
 
 def _compare(args) -> int:
     from .tasks.lift import compare_limits
-    print(compare_limits(args.payload_kg, tuple(args.limits_c), args.hold_s, solver=args.solver).table())
+    limits = tuple(args.limits_c) if args.limits_c else None
+    print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver).table())
     return 0
 
 
@@ -107,25 +109,27 @@ def _demo_parser() -> _Parser:
     demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
                                                        "current and winding heating")
     demo.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    demo.add_argument("--hold-s", type=float, default=60.0, help="duration of the hold, s (default %(default)s)")
+    demo.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S, help="duration of the hold, s (default %(default)s)")
     return demo
 
 
 def _plan_parser(name: str, description: str) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
     cmd.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    cmd.add_argument("--hold-s", type=float, default=30.0, help="requested hold at the goal, s (default %(default)s)")
+    cmd.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S, help="requested hold at the goal, s (default %(default)s)")
     cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
                      help="solver of the transcribed problem (default %(default)s)")
     if name == "plan":
-        cmd.add_argument("--limit-c", type=float, default=84.0, help="winding limit, °C (default %(default)s)")
+        cmd.add_argument("--limit-c", type=float, default=None,
+                         help="winding limit, °C (default: the model file's [limits] safety_cutoff_c, 84 for the elbow)")
         cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default: the packaged "
                                                          "models/arm_left_4_joint.toml)")
         cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
         cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
     else:
-        cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0],
-                         help="winding limits to compare, °C (default %(default)s)")
+        cmd.add_argument("--limits-c", type=float, nargs="+", default=None,
+                         help="winding limits to compare, °C (default: the elbow file's safety_cutoff_c and "
+                              "winding_max_c, 84 and 140)")
     return cmd
 
 

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.actuated import load_model
-
-ELBOW = "arm_left_4_joint"
+from ..model.arm import ELBOW
+from ..tasks._common import DEFAULT_HOLD_S, first_crossing, limit_pair_c
 
 
 @dataclass(frozen=True)
@@ -32,7 +32,9 @@ class HoldDemo:
         return "\n".join(lines)
 
 
-def hold_demo(payload_kg: float = 40.0, hold_s: float = 60.0, dt_s: float = 0.01) -> HoldDemo:
+def hold_demo(payload_kg: float = 40.0, hold_s: float = DEFAULT_HOLD_S, dt_s: float = 0.01) -> HoldDemo:
+    """Hold ``payload_kg`` with the forearm horizontal for ``hold_s`` from idle: the winding at 10, 30 and
+    60 s and when it reaches the elbow file's cut-off and short-term limits."""
     model = load_model((ELBOW,), payload_kg=payload_kg)
     q = np.array([-np.pi / 2])
     current = model.static_current_a(q)
@@ -40,8 +42,6 @@ def hold_demo(payload_kg: float = 40.0, hold_s: float = 60.0, dt_s: float = 0.01
     traj = model.simulate(model.state(q=q), np.tile(current, (steps, 1)), dt_s)
     winding = traj["winding_c"][:, 0]
     at = {t: float(np.interp(t, traj.time_s, winding)) for t in (10.0, 30.0, 60.0) if t <= hold_s}
-    limits = model.params[ELBOW].limits
-    first = {c: float(traj.time_s[np.argmax(winding >= c)]) if winding.max() >= c else float("inf")
-             for c in (limits.safety_cutoff_c, limits.winding_max_c)}
+    first = {c: first_crossing(traj.time_s, winding, c) for c in limit_pair_c(model.params[ELBOW])}
     return HoldDemo(payload_kg, model.arm.settings.payload_lever_m, float(model.arm.gravity_torque_nm(q)[0]),
                     float(current[0]), model.params[ELBOW].motor.current_nominal_a, float(winding[0]), at, first)

@@ -21,13 +21,17 @@ from typing import Any, Mapping
 import casadi as ca
 import numpy as np
 
-from ..model import motor
 from .._config import require, settings_from_mapping
+from ..model import motor
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW
 from ..model.integrators import rk4_substeps
+from ..model.parameters import load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
+from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c, default_limit_c,
+                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, limit_pair_c,
+                      solver_summary)
 
 log = logging.getLogger(__name__)
 
@@ -46,11 +50,14 @@ _SRC = "plan_lift"
 
 @dataclasses.dataclass(frozen=True)
 class LiftSettings:
-    """The lift scenario and its transcription (all times in s, angles in rad)."""
+    """The lift scenario and its transcription (all times in s, angles in rad).
+
+    ``limit_c``: the winding limit (None: the elbow parameter file's, see
+    :func:`thermo_ddp.tasks._common.default_limit_c`; :func:`build_lift_problem` fills it in)."""
 
     payload_kg: float = 40.0
-    limit_c: float = 84.0
-    hold_s: float = 10.0
+    limit_c: float | None = None
+    hold_s: float = DEFAULT_HOLD_S
     goal_rad: float = -math.pi / 2      # forearm horizontal
     start_rad: float = -0.05            # forearm hanging, just off the elbow's stop at 0 rad
     lift_s: float = 2.0
@@ -69,7 +76,7 @@ class LiftSettings:
 
     def __post_init__(self):
         require(self.payload_kg >= 0, _SRC, "payload_kg", self.payload_kg, "must be >= 0")
-        require(-50 < self.limit_c < 250, _SRC, "limit_c", self.limit_c, "expected a winding limit in °C")
+        check_limit_c(_SRC, self.limit_c)
         for name in ("hold_s", "settle_s"):
             require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
         for name in ("lift_s", "lower_s", "dt_s", "hold_tolerance_rad", "tracking_weight"):
@@ -89,19 +96,15 @@ def min_jerk(s: np.ndarray) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
-class LiftProblem:
+class LiftProblem(TaskProblem):
     """The transcribed lift: the general OCP plus its data (x0, per-knot parameters, time grid).
 
     The horizon is fixed by ``settings.hold_s``; :meth:`with_hold` gives a shorter hold inside the
     same horizon (new parameters only), so one built solver serves every hold duration.
+    ``settings.limit_c`` is the limit in use (the parameter file's when none was asked for).
     """
 
-    model: ActuatedArm
     settings: LiftSettings
-    problem: OptimalControlProblem
-    x0: np.ndarray
-    params: np.ndarray
-    time_s: np.ndarray
     hold_knots: tuple[int, int]
 
     def with_hold(self, hold_s: float) -> "LiftProblem":
@@ -142,8 +145,6 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     jac = model.step_jacobians(settings.dt_s, settings.integrator)
     dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, p[3])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
-    voltage = motor.voltage_v(m, u[0], v, winding)
-    lo, hi = model.arm.model.lowerPositionLimit[0], model.arm.model.upperPositionLimit[0]
     vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])
     tol, goal, start = settings.hold_tolerance_rad, settings.goal_rad, settings.start_rad
 
@@ -161,17 +162,12 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     )
     terminal_costs = (Cost("terminal_tracking", settings.tracking_weight, terminal("terminal_tracking", q - start)),
                       Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
-    wl, jr, jv = winding - settings.limit_c, ca.vertcat(q - hi, lo - q), ca.vertcat(v - vmax, -v - vmax)
-    constraints = (
-        Constraint("winding_limit", stage("winding_limit", wl, "g")),
-        Constraint("bus_voltage", stage("bus_voltage", ca.vertcat(voltage - m.bus_voltage_v,
-                                                                   -voltage - m.bus_voltage_v), "g")),
-        Constraint("joint_range", stage("joint_range", jr, "g")),
-        Constraint("joint_velocity", stage("joint_velocity", jv, "g")),
+    limits = joint_limit_constraints(model, joint, x, u[0], settings.limit_c, vmax)
+    constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
         Constraint("hold_band", stage("hold_band", ca.vertcat(p[2] * (q - goal) - tol, p[2] * (goal - q) - tol), "g")),
     )
     terminal_constraints = (
-        Constraint("terminal_winding_limit", terminal("terminal_winding_limit", wl, "g")),
+        Constraint("terminal_winding_limit", terminal("terminal_winding_limit", limits["winding_limit"], "g")),
         Constraint("return_band", terminal("return_band", ca.vertcat(q - start - tol, start - q - tol), "g")),
     )
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
@@ -180,21 +176,16 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
+    if settings.limit_c is None:
+        settings = dataclasses.replace(settings, limit_c=default_limit_c(model.params[model.joints[0]]))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
     dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
     problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons,
                                     u_lb=[-peak], u_ub=[peak], name="lift", dynamics_jacobians=dyn_jac)
     x0 = model.state(q=[settings.start_rad])
-    return LiftProblem(model, settings, problem, x0, params, np.arange(params.shape[0]) * settings.dt_s, hold)
-
-
-def initial_guess(lp: LiftProblem) -> WarmStart:
-    """States on the reference at the idle temperatures, currents from static gravity compensation."""
-    q_ref = lp.params[:, 0]
-    xs = np.tile(lp.x0, (q_ref.size, 1))
-    xs[:, 0] = q_ref
-    us = np.array([lp.model.static_current_a([q]) for q in q_ref[:-1]])
-    return WarmStart(xs, us)
+    return LiftProblem(model=model, problem=problem, x0=x0, params=params,
+                       time_s=np.arange(params.shape[0]) * settings.dt_s, box_names=("current_peak",),
+                       settings=settings, hold_knots=hold)
 
 
 def make_solver(lp: LiftProblem, solver: str | None = None, options: Mapping[str, Any] | None = None):
@@ -207,30 +198,6 @@ def solve(lp: LiftProblem, solver=None, warm_start: WarmStart | None = None) -> 
     """Solve the lift with a solver instance (or the name of one, built here)."""
     instance = solver if hasattr(solver, "solve") else make_solver(lp, solver)
     return instance.solve(lp.x0, lp.params, warm_start or initial_guess(lp))
-
-
-def _feasible(result: SolverResult, tol: float = 1e-4) -> bool:
-    return bool(result.success and result.max_constraint_violation <= tol)
-
-
-def _constraint_names(problem: OptimalControlProblem, terminal: bool) -> list[str]:
-    items = problem.terminal_constraints if terminal else problem.constraints
-    return [c.name for c in items for _ in range(c.size)]
-
-
-def binding_constraints(lp: LiftProblem, result: SolverResult, active_tol: float = 1e-3) -> list[str]:
-    """Names of the inequality constraints at their bound somewhere on the plan (control box included)."""
-    f = lp.problem.functions
-    n = lp.problem.horizon
-    g = np.array(f.stage_constraint.map(n)(result.xs[:-1].T, result.us.T, lp.params[:-1].T)).T
-    gn = np.array(f.terminal_constraint(result.xs[-1], lp.params[-1])).ravel()
-    names = set()
-    for values, labels in ((g.max(axis=0) if g.size else g, _constraint_names(lp.problem, False)),
-                           (gn, _constraint_names(lp.problem, True))):
-        names.update(label for value, label in zip(values, labels) if value >= -active_tol)
-    if np.any(np.abs(result.us) >= lp.problem.u_ub - active_tol):
-        names.add("current_peak")
-    return sorted(names)
 
 
 def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limit_c: float,
@@ -247,12 +214,9 @@ def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limi
         n = min(chunk, left)
         traj = model.simulate(x, np.tile(current, (n, 1)), dt_s, "implicit_euler")
         w = traj["winding_c"][:, 0]
-        hit = np.flatnonzero(w >= limit_c)
-        if hit.size:
-            i = hit[0]
-            if i == 0:
-                return 0.0
-            return float(done * dt_s + np.interp(limit_c, w[i - 1:i + 1], traj.time_s[i - 1:i + 1]))
+        t = first_crossing(traj.time_s, w, limit_c)
+        if math.isfinite(t):
+            return done * dt_s + t
         x, done, left, chunk = traj.xs[-1], done + n, left - n, 8 * chunk
     return math.inf
 
@@ -286,11 +250,11 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSea
     def feasible(knots: int) -> bool:
         if knots not in probes:
             probe = lp.with_hold(knots * lp.settings.dt_s)
-            done = [k for k, (_, r) in probes.items() if _feasible(r)]
+            done = [k for k, (_, r) in probes.items() if is_feasible(r)]
             warm = WarmStart.from_result(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
             probes[knots] = (probe, solve(probe, solver, warm))
             log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
-        return _feasible(probes[knots][1])
+        return is_feasible(probes[knots][1])
 
     top = lp.hold_knots[1] - lp.hold_knots[0]  # the request
     guess = int(np.clip(np.floor(estimate_s / lp.settings.dt_s), 0, top))
@@ -312,7 +276,7 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSea
 
 
 @dataclasses.dataclass(frozen=True)
-class LiftPlan:
+class LiftPlan(PlanSeries):
     """The answer of :func:`plan_lift` (contract: ``to_dict()`` is the plan JSON)."""
 
     feasible: bool
@@ -328,54 +292,18 @@ class LiftPlan:
     binding_constraints: tuple[str, ...]
     time_to_limit_s: float
 
-    @property
-    def success(self) -> bool:
-        return self.feasible
-
-    def series(self, quantity: str) -> np.ndarray:
-        """(N+1, joints) of a state quantity (q_rad, v_rad_s, winding_c, casing_c, drive_c)."""
-        return self.xs[:, [self.model.index(j, quantity) for j in self.model.joints]]
-
-    def sensor_c(self) -> np.ndarray:
-        """(N+1, joints) of the measured node: the casing, or the winding itself in a one-node model."""
-        nets = self.model.networks
-        return self.xs[:, [self.model.index(j, f"{nets[j].sensor_node}_c") for j in self.model.joints]]
-
-    def currents(self) -> np.ndarray:
-        """(N+1, joints): u_k holds on [t_k, t_k+1); the last value is repeated at t_N."""
-        return np.vstack([self.us, self.us[-1:]])
-
-    def voltage_v(self) -> np.ndarray:
-        out = self.model.outputs.map(self.xs.shape[0])
-        amb = np.full((1, self.xs.shape[0]), self.model.ambient_c)
-        return np.array(out(self.xs.T, self.currents().T, amb)[0]).T
-
     def to_dict(self) -> dict:
         s = self.settings
-        d = {"feasible": self.feasible, "status": self.status, "message": self.message,
-             "payload_kg": s.payload_kg, "limit_c": s.limit_c, "hold_s": s.hold_s,
-             "achieved_hold_s": self.achieved_hold_s, "joints": list(self.model.joints),
-             "time_s": self.time_s.tolist(), "q_rad": self.series("q_rad").tolist(),
-             "v_rad_s": self.series("v_rad_s").tolist(), "current_a": self.currents().tolist(),
-             "voltage_v": self.voltage_v().tolist(), "winding_c": self.series("winding_c").tolist(),
-             "casing_c": self.sensor_c().tolist()}
-        if "drive" in self.model.networks[self.model.joints[0]].nodes:
-            d["drive_c"] = self.series("drive_c").tolist()
-        d["model"] = self.model.to_dict(s.integrator, s.dt_s)
-        d["solver"] = dict(self.solver)
-        d["binding_constraints"] = list(self.binding_constraints)
-        d["time_to_limit_s"] = None if math.isinf(self.time_to_limit_s) else self.time_to_limit_s
-        return d
+        return self.contract_dict(s.payload_kg, s.limit_c, s.hold_s, self.achieved_hold_s, s.integrator, s.dt_s)
 
     def report(self) -> str:
         w, c = self.series("winding_c").max(), self.sensor_c().max()
-        ttl = "never" if math.isinf(self.time_to_limit_s) else f"{self.time_to_limit_s:.1f} s"
         return "\n".join([
             f"lift {self.settings.payload_kg:g} kg, winding limit {self.settings.limit_c:g} °C: "
             f"{'FEASIBLE' if self.feasible else 'INFEASIBLE'} ({self.status})",
             f"  {self.message}",
             f"  hold requested {self.settings.hold_s:.1f} s, achieved {self.achieved_hold_s:.1f} s; "
-            f"time to limit at the goal {ttl}",
+            f"time to limit at the goal {format_s(self.time_to_limit_s)}",
             f"  peak winding {w:.1f} °C, peak casing {c:.1f} °C, peak |current| {np.abs(self.us).max():.2f} A",
             f"  binding: {', '.join(self.binding_constraints) or 'none'}",
             f"  solver {self.solver['name']}: {self.solver['iterations']} iterations, "
@@ -386,18 +314,15 @@ class LiftPlan:
         plot_lift(self, path)
 
 
-def _solver_summary(name: str, result: SolverResult, total_s: float, solves: int) -> dict:
-    return {"name": name, "iterations": int(result.iterations), "solve_s": float(result.solve_s),
-            "cost": float(result.cost), "max_constraint_violation": float(result.max_constraint_violation),
-            "status": result.status, "total_solve_s": float(total_s), "solves": solves}
-
-
-def plan_lift(payload_kg: float = 40.0, limit_c: float = 84.0, hold_s: float = 10.0, **options) -> LiftPlan:
+def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: float = DEFAULT_HOLD_S,
+              **options) -> LiftPlan:
     """Plan lifting ``payload_kg`` at the gripper to horizontal, holding ``hold_s``, lowering back,
-    with the winding kept under ``limit_c``. Options: the fields of :class:`LiftSettings`."""
+    with the winding kept under ``limit_c`` (None: the elbow parameter file's limit).
+    Options: the fields of :class:`LiftSettings`."""
     settings = settings_from_mapping(LiftSettings, {"payload_kg": payload_kg, "limit_c": limit_c,
                                                     "hold_s": hold_s, **options}, _SRC)
     lp = build_lift_problem(settings)
+    settings, limit_c = lp.settings, lp.settings.limit_c
     solver = make_solver(lp)
     top = lp.hold_knots[1] - lp.hold_knots[0]
     if settings.find_longest_hold:
@@ -405,7 +330,7 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float = 84.0, hold_s: float = 1
         (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
     else:
         result = solve(lp, solver)
-        total, solves, knots = result.solve_s, 1, top if _feasible(result) else -1
+        total, solves, knots = result.solve_s, 1, top if is_feasible(result) else -1
     achieved = max(knots, 0) * settings.dt_s
     if knots == top:
         status, message, achieved = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C", hold_s
@@ -421,7 +346,7 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float = 84.0, hold_s: float = 1
         message += f"; binding: {', '.join(binding)}"
     ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
     return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
-                    result.us, lp.model, _solver_summary(settings.solver, result, total, solves), binding, ttl)
+                    result.us, lp.model, solver_summary(result, total, solves, name=settings.solver), binding, ttl)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -456,7 +381,10 @@ def joule_energy_j(plan: LiftPlan) -> float:
     return float(power.sum() * plan.settings.dt_s)
 
 
-def compare_limits(payload_kg: float = 40.0, limits_c=(84.0, 140.0), hold_s: float = 30.0,
+def compare_limits(payload_kg: float = 40.0, limits_c=None, hold_s: float = DEFAULT_HOLD_S,
                    **options) -> LimitComparison:
-    """:func:`plan_lift` under each winding limit (e.g. the 84 °C cut-off vs the 140 °C range)."""
+    """:func:`plan_lift` under each winding limit; by default the elbow file's cut-off and short-term
+    winding limit (:func:`thermo_ddp.tasks._common.limit_pair_c`: 84 °C and 140 °C)."""
+    if limits_c is None:
+        limits_c = limit_pair_c(load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW)))
     return LimitComparison(tuple(plan_lift(payload_kg, lim, hold_s, **options) for lim in limits_c))
