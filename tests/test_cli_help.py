@@ -52,4 +52,5 @@ def test_help_exits_0_and_prints_the_defaults(capsys):
         COMMANDS["plan"][0]().parse_args(["--help"])
     assert exc.value.code == 0
     out = capsys.readouterr().out
-    assert "(default 84.0)" in out and "°C" in out
+    assert "safety_cutoff_c, 84 for the elbow" in out and "°C" in out
+    assert "(default 60.0)" in out  # the one default hold, tasks._common.DEFAULT_HOLD_S
