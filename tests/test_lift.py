@@ -133,3 +133,10 @@ def test_default_limit_and_hold_have_one_home(tmp_path, elbow_file):
     save_parameters(params.replace("limits", safety_cutoff_c=70.0), path)
     assert build_lift_problem(LiftSettings(hold_s=1.0, parameter_file=str(path))).settings.limit_c == 70.0
     assert LiftSettings().hold_s == DEFAULT_HOLD_S
+
+
+@pytest.mark.parametrize("limit_c, field", [(141.0, "winding_max_c"), (20.0, "ambient_c")])
+def test_limit_outside_the_files_range_is_refused(limit_c, field):
+    """The file's [limits] winding_max_c bounds any requested limit; a limit at or below the room is no limit."""
+    with pytest.raises(InputError, match=f"limit_c = {limit_c}.*{field}"):
+        plan_lift(40.0, limit_c, 5.0)

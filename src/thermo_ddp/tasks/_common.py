@@ -54,8 +54,18 @@ def limit_pair_c(params: JointParameters) -> tuple[float, float]:
 
 
 def winding_limits_c(model: ActuatedArm, limit_c: float | None = None) -> dict[str, float]:
-    """Each joint's winding limit: ``limit_c`` when given, else the joint's own default."""
-    return {j: float(limit_c) if limit_c is not None else default_limit_c(model.params[j]) for j in model.joints}
+    """Each joint's winding limit: ``limit_c`` when given, else the joint's own default. A limit above
+    a file's ``winding_max_c`` (what the winding takes at all) or not above its ambient is refused."""
+    limits = {}
+    for j in model.joints:
+        params = model.params[j]
+        value = float(limit_c) if limit_c is not None else default_limit_c(params)
+        require(value <= params.limits.winding_max_c, params.path, "limit_c", value,
+                f"above the winding's rated maximum [limits] winding_max_c = {params.limits.winding_max_c:g} °C")
+        require(value > params.thermal.ambient_c, params.path, "limit_c", value,
+                f"not above the room temperature [thermal] ambient_c = {params.thermal.ambient_c:g} °C")
+        limits[j] = value
+    return limits
 
 
 def check_limit_c(source: str, limit_c: float | None) -> None:

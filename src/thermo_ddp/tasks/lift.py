@@ -29,9 +29,9 @@ from ..model.integrators import rk4_substeps
 from ..model.parameters import load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
-from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c, default_limit_c,
+from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c,
                       first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, limit_pair_c,
-                      solver_summary)
+                      solver_summary, winding_limits_c)
 
 log = logging.getLogger(__name__)
 
@@ -176,8 +176,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
-    if settings.limit_c is None:
-        settings = dataclasses.replace(settings, limit_c=default_limit_c(model.params[model.joints[0]]))
+    settings = dataclasses.replace(settings, limit_c=winding_limits_c(model, settings.limit_c)[model.joints[0]])
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
     dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
     problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons,
