@@ -67,11 +67,7 @@ class Cost:
     residual: ca.Function
 
     def __post_init__(self):
-        _check_name(self.name, "Cost")
-        if not isinstance(self.residual, ca.Function):
-            raise InputError(f"Cost '{self.name}'", "residual", type(self.residual).__name__,
-                             "expected a casadi.Function")
-        out = _output_index(self.residual, "r", f"Cost '{self.name}'")
+        out = _check_term("Cost", self.name, "residual", self.residual, "r")
         size = self.residual.size1_out(out) * self.residual.size2_out(out)
         object.__setattr__(self, "weight", _weight_vector(self.weight, size, f"Cost '{self.name}'"))
 
@@ -88,11 +84,7 @@ class Constraint:
     function: ca.Function
 
     def __post_init__(self):
-        _check_name(self.name, "Constraint")
-        if not isinstance(self.function, ca.Function):
-            raise InputError(f"Constraint '{self.name}'", "function", type(self.function).__name__,
-                             "expected a casadi.Function")
-        _output_index(self.function, "g", f"Constraint '{self.name}'")
+        _check_term("Constraint", self.name, "function", self.function, "g")
 
     @property
     def size(self) -> int:
@@ -100,9 +92,13 @@ class Constraint:
         return self.function.size1_out(out) * self.function.size2_out(out)
 
 
-def _check_name(name, kind):
+def _check_term(kind: str, name, field: str, fun, out_name: str) -> int:
+    """A cost's or constraint's name and CasADi function; returns the index of its output."""
     if not isinstance(name, str) or not name.isidentifier():
         raise InputError(kind, "name", name, "expected an identifier-like string")
+    if not isinstance(fun, ca.Function):
+        raise InputError(f"{kind} '{name}'", field, type(fun).__name__, "expected a casadi.Function")
+    return _output_index(fun, out_name, f"{kind} '{name}'")
 
 
 def _call_named(fun: ca.Function, out_name: str, args: dict, where: str):

@@ -350,3 +350,15 @@ def read_recording(path: str | Path, topic_map: TopicMap | None = None) -> Recor
     if topic_map is None:
         raise InputError(str(path), "file", path.suffix or "directory", "not a .csv file; a bag needs a topic map")
     return read_bag(path, topic_map)
+
+
+def as_recordings(recordings, source: str) -> list[Recording]:
+    """Recording objects or paths (one or a sequence) -> validated, distinctly named recordings."""
+    recordings = [recordings] if isinstance(recordings, (Recording, str, Path)) else list(recordings)
+    recordings = [r if isinstance(r, Recording) else read_recording(r) for r in recordings]
+    if not recordings:
+        raise InputError(source, "recordings", "none", "give at least one recording")
+    names = [r.name for r in recordings]
+    if len(set(names)) != len(names):
+        raise InputError(source, "recordings", ", ".join(names), "recording names must be distinct")
+    return recordings

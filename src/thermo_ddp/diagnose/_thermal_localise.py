@@ -26,43 +26,38 @@ from typing import Sequence
 import numpy as np
 from scipy import stats
 
-from .._config import require
-from ..identify.thermal import integrated_autocorrelation
+from .._config import checked_settings
+from ..identify.fit_report import integrated_autocorrelation
 from ..identify.thermal_data import ThermalGrid
 from .localise import Localisation, Mismatch, RegimeTest, ResidualSeries, robust_scale
 
 THERMAL_REGIMES = ("heating", "cooling", "idle", "moving", "static")
 
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("thermal regime settings", window_s="(0, inf)", moving_rad_s="(0, inf)", load_a="(0, inf)",
+                  trend_window_s="(0, inf)", trend_k_per_h="(0, inf)")
 class ThermalRegimeSettings:
+    """How samples are labelled moving / heating / static / cooling / idle (module docstring)."""
+
     window_s: float = 60.0
     moving_rad_s: float = 0.1
     load_a: float = 0.5
     trend_window_s: float = 600.0
     trend_k_per_h: float = 1.0
 
-    def __post_init__(self) -> None:
-        src = "thermal regime settings"
-        for key in dataclasses.asdict(self):
-            require(getattr(self, key) > 0, src, key, getattr(self, key), "must be > 0")
 
-
-@dataclasses.dataclass(frozen=True)
+@checked_settings("thermal localise settings", window_s="(0, inf)", noise_window_s="(0, inf)",
+                  min_effect_c="[0, inf)", alpha="(0, 1)", min_samples="[2, inf)")
 class ThermalLocaliseSettings:
+    """Windows of about ``window_s`` are tested against the noise of a ``noise_window_s`` high-pass at
+    false-alarm rate ``alpha``; a systematic window must be at least ``min_effect_c`` in size and hold
+    ``min_samples`` samples (module docstring)."""
+
     window_s: float = 600.0
     noise_window_s: float = 120.0
     min_effect_c: float = 0.5
     alpha: float = 0.01
     min_samples: int = 3
-
-    def __post_init__(self) -> None:
-        src = "thermal localise settings"
-        require(self.window_s > 0, src, "window_s", self.window_s, "must be > 0")
-        require(self.noise_window_s > 0, src, "noise_window_s", self.noise_window_s, "must be > 0")
-        require(self.min_effect_c >= 0, src, "min_effect_c", self.min_effect_c, "must be >= 0")
-        require(0 < self.alpha < 1, src, "alpha", self.alpha, "must be in (0, 1)")
-        require(self.min_samples >= 2, src, "min_samples", self.min_samples, "must be >= 2")
 
 
 def held_window_mean(grid: ThermalGrid, row: int, half_s: float) -> np.ndarray:

@@ -29,13 +29,15 @@ from typing import Sequence
 import numpy as np
 from scipy import stats
 
-from .._config import require
+from .._config import checked_settings
 from ..errors import InputError
+from ..identify.fit_report import correlation_time
 
 log = logging.getLogger(__name__)
 
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("localise settings", alpha="(0, 1)", min_effect="[0, inf)", min_clusters="[3, inf)",
+                  batch_taus="[1, inf)")
 class LocaliseSettings:
     """``alpha``: family-wise false-alarm probability per call; ``min_effect``: smallest systematic
     mean worth reporting, in robust residual scales; ``min_clusters``: fewest independent clusters
@@ -45,13 +47,6 @@ class LocaliseSettings:
     min_effect: float = 0.25
     min_clusters: int = 5
     batch_taus: float = 5.0
-
-    def __post_init__(self) -> None:
-        src = "localise settings"
-        require(0 < self.alpha < 1, src, "alpha", self.alpha, "must be in (0, 1)")
-        require(self.min_effect >= 0, src, "min_effect", self.min_effect, "must be >= 0")
-        require(self.min_clusters >= 3, src, "min_clusters", self.min_clusters, "must be >= 3")
-        require(self.batch_taus >= 1, src, "batch_taus", self.batch_taus, "must be >= 1")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,20 +128,6 @@ class _Occurrence:
     stop: int        # exclusive
     regime: str
     sign: float
-
-
-def correlation_time(time_s: np.ndarray, residual: np.ndarray) -> float:
-    """First lag (seconds) where the residual's autocorrelation drops below 1/e (FFT estimate)."""
-    x = np.asarray(residual, float) - np.mean(residual)
-    n = x.size
-    if n < 3 or not np.any(x):
-        return 0.0
-    spectrum = np.fft.rfft(x, 2 * n)
-    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
-    acf /= acf[0]
-    below = np.flatnonzero(acf < np.exp(-1.0))
-    lag = below[0] if below.size else n
-    return float(lag * np.median(np.diff(time_s)))
 
 
 def robust_scale(residual: np.ndarray) -> float:

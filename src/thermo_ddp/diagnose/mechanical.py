@@ -23,13 +23,13 @@ from typing import Sequence
 
 import numpy as np
 
-from .._config import require
+from .._config import checked_settings, require
 from ..errors import InputError
 from ..identify.mechanical import (BASELINE_TERMS, STRIBECK_VELOCITY, JointKinematics, MechanicalSettings,
                                    fit_kinematics, joint_kinematics, predict_effort)
-from ..recordings import Recording, read_recording
+from ..recordings import Recording, as_recordings
 from .localise import Localisation, LocaliseSettings, ResidualSeries, localise
-from .selection import ModelFit, Selection, SelectionSettings, TermSpec, forward_select
+from .selection import ModelFit, SelectedTerms, Selection, SelectionSettings, TermSpec, forward_select
 from .._figures import new_figure
 
 log = logging.getLogger(__name__)
@@ -46,7 +46,7 @@ TERM_SPECS = {
 }
 
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("mechanical diagnosis settings", cv_blocks="[2, inf)")
 class MechanicalDiagnosisSettings:
     """Regime thresholds (fractions of the 99th-percentile speed) and the number of CV blocks per recording."""
 
@@ -60,7 +60,6 @@ class MechanicalDiagnosisSettings:
         fractions = (self.static_fraction, self.reversal_fraction, self.slow_fraction)
         require(0 < fractions[0] < fractions[1] < fractions[2] < 1, src, "static/reversal/slow_fraction",
                 fractions, "need 0 < static < reversal < slow < 1")
-        require(self.cv_blocks >= 2, src, "cv_blocks", self.cv_blocks, "must be >= 2")
 
 
 def motion_regimes(velocity: np.ndarray, settings: MechanicalDiagnosisSettings | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -122,7 +121,7 @@ def _residual_series(kins: Sequence[JointKinematics], mf: ModelFit, settings: Me
 
 
 @dataclasses.dataclass(frozen=True)
-class Diagnosis:
+class Diagnosis(SelectedTerms):
     """Result of :func:`diagnose_mechanical`; ``to_dict()`` is the contract's diagnosis JSON."""
 
     physics: str
@@ -133,10 +132,6 @@ class Diagnosis:
     success: bool = True
     status: str = "ok"
     message: str = "diagnosis ran"
-
-    @property
-    def missing_physics(self) -> list[str]:
-        return [a.term for a in self.selection.accepted]
 
     def to_dict(self) -> dict:
         sel = self.selection
@@ -205,13 +200,7 @@ def diagnose_mechanical(recordings: Sequence[Recording | str | Path] | Recording
                         localise_settings: LocaliseSettings | None = None,
                         selection_settings: SelectionSettings | None = None) -> Diagnosis:
     """Diagnose recordings (``position`` + ``effort``; Recording objects or CSV paths) against ``baseline``."""
-    recordings = [recordings] if isinstance(recordings, (Recording, str, Path)) else list(recordings)
-    recordings = [r if isinstance(r, Recording) else read_recording(r) for r in recordings]
-    if not recordings:
-        raise InputError("diagnose", "recordings", "none", "give at least one recording")
-    names = [r.name for r in recordings]
-    if len(set(names)) != len(names):
-        raise InputError("diagnose", "recordings", ", ".join(names), "recording names must be distinct")
+    recordings = as_recordings(recordings, "diagnose")
     for term in list(baseline) + list(candidates):
         if term not in TERM_SPECS:
             raise InputError("diagnose", "term", term, f"unknown; known: {', '.join(TERM_SPECS)}")
@@ -229,7 +218,7 @@ def diagnose_mechanical(recordings: Sequence[Recording | str | Path] | Recording
     fixed = [TERM_SPECS[t] for t in baseline]
     selection = forward_select(fit, locate, tuple(baseline), library, fixed, selection_settings)
     ok = selection.baseline.fit.success and selection.final.fit.success
-    return Diagnosis("mechanical", tuple(names), selection, kins, regime_settings.cv_blocks, success=ok,
+    return Diagnosis("mechanical", tuple(r.name for r in recordings), selection, kins, regime_settings.cv_blocks, success=ok,
                      status="ok" if ok else selection.final.fit.status,
                      message="diagnosis ran" if ok else selection.final.fit.message)
 

@@ -27,7 +27,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .._config import require
+from .._config import checked_settings
 from ..identify.fit_report import FitResult
 from .localise import Localisation
 
@@ -68,19 +68,16 @@ class ModelFit:
         return {int(b): float(np.mean(self.cv_residual[self.blocks == b] ** 2)) for b in np.unique(self.blocks)}
 
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("selection settings", min_local_gain="[0, 1)", min_concentration="[0, inf)",
+                  min_cv_gain="[0, 1)", min_block_share="(0, 1]")
 class SelectionSettings:
+    """The acceptance thresholds of a candidate term (module docstring: local gain, concentration,
+    cross-validated gain, share of improved blocks)."""
+
     min_local_gain: float = 0.2
     min_concentration: float = 1.0
     min_cv_gain: float = 0.02
     min_block_share: float = 0.6
-
-    def __post_init__(self) -> None:
-        src = "selection settings"
-        require(0 <= self.min_local_gain < 1, src, "min_local_gain", self.min_local_gain, "must be in [0, 1)")
-        require(self.min_concentration >= 0, src, "min_concentration", self.min_concentration, "must be >= 0")
-        require(0 <= self.min_cv_gain < 1, src, "min_cv_gain", self.min_cv_gain, "must be in [0, 1)")
-        require(0 < self.min_block_share <= 1, src, "min_block_share", self.min_block_share, "must be in (0, 1]")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,6 +155,14 @@ def assess(current: ModelFit, candidate: ModelFit, term: str, localisation: Loca
                       physical=not violations, local_gain=float(local_gain), concentration=float(concentration),
                       cv_gain=float(cv_gain), blocks_improved=f"{better}/{len(judged)}", violations=violations,
                       regimes=regimes)
+
+
+class SelectedTerms:
+    """Mixin of a diagnosis holding a ``selection``: the terms it found missing, in order."""
+
+    @property
+    def missing_physics(self) -> list[str]:
+        return [a.term for a in self.selection.accepted]
 
 
 @dataclasses.dataclass(frozen=True)

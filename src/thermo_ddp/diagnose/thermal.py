@@ -40,14 +40,16 @@ from tqdm.auto import tqdm
 
 from .._config import require
 from ..errors import InputError
-from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, ThermalFit, ThermalModel, as_recordings,
+from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, ThermalFit, ThermalModel,
                                 default_fixed, fit_grids, load_joint_parameters, network_model, parameter_file,
                                 start_values)
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, thermal_grid
+from ..recordings import as_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
                                 thermal_regimes)
 from .localise import Localisation, ResidualSeries
-from .selection import ModelFit, Selection, SelectionSettings, TermSpec, forward_select, physical_violations
+from .selection import (ModelFit, SelectedTerms, Selection, SelectionSettings, TermSpec, forward_select,
+                        physical_violations)
 from .._figures import new_figure
 
 log = logging.getLogger(__name__)
@@ -218,7 +220,7 @@ def regime_gains(current: ModelFit, candidate: ModelFit, localisation: Localisat
 
 
 @dataclasses.dataclass(frozen=True)
-class ThermalDiagnosis:
+class ThermalDiagnosis(SelectedTerms):
     """Result of :func:`diagnose_thermal`; ``to_dict()`` is the contract's diagnosis JSON plus
     ``parameter_file`` (the improved parameter sections, loadable with ``parameters_from_dict``)."""
 
@@ -235,10 +237,6 @@ class ThermalDiagnosis:
     success: bool = True
     status: str = "ok"
     message: str = "diagnosis ran"
-
-    @property
-    def missing_physics(self) -> list[str]:
-        return [a.term for a in self.selection.accepted]
 
     def parameter_file(self) -> dict | None:
         if not self.final_fit.success:
@@ -333,7 +331,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     speed-dependent terms; ``ambient_c`` if logged) against the one-node baseline."""
     settings = settings or ThermalDiagnosisSettings()
     params = load_joint_parameters(parameters)
-    recs = as_recordings(recordings)
+    recs = as_recordings(recordings, "thermal")
     grids = tuple(thermal_grid(r, params, settings.fit) for r in recs)
     for g in grids:
         if len(g) < 4 * settings.cv_blocks:

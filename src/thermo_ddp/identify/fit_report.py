@@ -151,3 +151,36 @@ def linear_fit(X: np.ndarray, y: np.ndarray, names: Sequence[str], *, model: str
     fitted = X @ values
     return result_from_jacobian(model, names, values, y - fitted, X, fitted=fitted, extra=extra,
                                 time_s=time_s, units=units, message="linear least squares", notes=notes)
+
+
+def autocorrelation(residual: np.ndarray) -> np.ndarray | None:
+    """Normalised autocorrelation of a residual at lags 0..n-1 (FFT estimate); None if constant."""
+    x = np.asarray(residual, float) - np.mean(residual)
+    if not np.any(x):
+        return None
+    spectrum = np.fft.rfft(x, 2 * x.size)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:x.size]
+    return acf / acf[0]
+
+
+def correlation_time(time_s: np.ndarray, residual: np.ndarray) -> float:
+    """First lag (seconds) where the residual's autocorrelation drops below 1/e."""
+    acf = autocorrelation(residual) if np.size(residual) >= 3 else None
+    if acf is None:
+        return 0.0
+    below = np.flatnonzero(acf < np.exp(-1.0))
+    lag = below[0] if below.size else acf.size
+    return float(lag * np.median(np.diff(time_s)))
+
+
+def integrated_autocorrelation(residual: np.ndarray) -> float:
+    """1 + 2 sum of autocorrelations (Geyer's initial positive sequence): variance inflation of a mean."""
+    acf = autocorrelation(residual) if np.size(residual) >= 4 else None
+    if acf is None:
+        return 1.0
+    n = acf.size
+    m = n // 2
+    gamma = acf[0:2 * m:2] + acf[1:2 * m:2]  # Gamma_k = rho_2k + rho_2k+1
+    stop = np.flatnonzero(gamma <= 0)
+    tau = -1.0 + 2.0 * gamma[: stop[0] if stop.size else m].sum()
+    return float(min(max(tau, 1.0), n))

@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 from scipy import optimize, signal
 
-from .._config import require
+from .._config import checked_settings, require
 from ..errors import InputError
 from ..recordings import Recording, resample
 from .fit_report import FitResult, failed_fit, linear_fit
@@ -36,7 +36,8 @@ REFERENCE_TERMS = ("inertia", "viscous_friction", "coulomb_friction", "effort_of
 STRIBECK_VELOCITY = "stribeck_velocity"
 
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("mechanical settings", cutoff_hz="(0, inf)", filter_order="[1, 8]", decimate="[1, inf)",
+                  stribeck_grid="[4, inf)")
 class MechanicalSettings:
     """How derivatives are estimated and how the Stribeck velocity is searched.
 
@@ -56,13 +57,9 @@ class MechanicalSettings:
 
     def __post_init__(self) -> None:
         src = "mechanical settings"
-        require(self.cutoff_hz > 0, src, "cutoff_hz", self.cutoff_hz, "must be > 0")
-        require(1 <= self.filter_order <= 8, src, "filter_order", self.filter_order, "must be 1..8")
-        require(self.decimate >= 1, src, "decimate", self.decimate, "must be >= 1")
         require(self.trim_s is None or self.trim_s >= 0, src, "trim_s", self.trim_s, "must be >= 0")
         lo, hi = self.stribeck_range
         require(0 < lo < hi, src, "stribeck_range", self.stribeck_range, "need 0 < low < high")
-        require(self.stribeck_grid >= 4, src, "stribeck_grid", self.stribeck_grid, "must be >= 4")
 
 
 @dataclasses.dataclass(frozen=True)

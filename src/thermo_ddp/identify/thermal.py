@@ -55,12 +55,11 @@ import numpy as np
 from scipy import optimize
 
 from .._config import require
-from ..errors import InputError
 from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
                                 packaged_parameter_file, parameters_from_dict, unit)
-from ..recordings import Recording, read_recording
+from ..recordings import as_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
-from .fit_report import Z95, FitResult, result_from_jacobian
+from .fit_report import Z95, FitResult, integrated_autocorrelation, result_from_jacobian
 from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
@@ -327,22 +326,6 @@ def _theta_bounds(keys: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
-def integrated_autocorrelation(residual: np.ndarray) -> float:
-    """1 + 2 sum of autocorrelations (Geyer's initial positive sequence): variance inflation of a mean."""
-    x = np.asarray(residual, float) - np.mean(residual)
-    n = x.size
-    if n < 4 or not np.any(x):
-        return 1.0
-    spectrum = np.fft.rfft(x, 2 * n)
-    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
-    acf /= acf[0]
-    m = n // 2
-    gamma = acf[0:2 * m:2] + acf[1:2 * m:2]  # Gamma_k = rho_2k + rho_2k+1
-    stop = np.flatnonzero(gamma <= 0)
-    tau = -1.0 + 2.0 * gamma[: stop[0] if stop.size else m].sum()
-    return float(min(max(tau, 1.0), n))
-
-
 class _Problem:
     """Stacked residual and Jacobian of several recordings for the optimiser (memoised per theta)."""
 
@@ -520,18 +503,6 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
     return load_parameters(parameters if parameters is not None else packaged_parameter_file("arm_left_4_joint"))
 
 
-def as_recordings(recordings) -> list[Recording]:
-    """Recording objects or CSV paths (one or a sequence) -> validated, distinctly named recordings."""
-    recordings = [recordings] if isinstance(recordings, (Recording, str, Path)) else list(recordings)
-    recordings = [r if isinstance(r, Recording) else read_recording(r) for r in recordings]
-    if not recordings:
-        raise InputError("thermal", "recordings", "none", "give at least one recording")
-    names = [r.name for r in recordings]
-    if len(set(names)) != len(names):
-        raise InputError("thermal", "recordings", ", ".join(names), "recording names must be distinct")
-    return recordings
-
-
 def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
     """Keys held at the parameter file's values by default: with only the casing measured, the drive's
     path to ambient and its current-dependent loss trade off against its idle heat and coupling."""
@@ -548,7 +519,7 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
     ``fixed`` names free keys to hold at their start values (default :func:`default_fixed`)."""
     settings = settings or ThermalSettings()
     params = load_joint_parameters(parameters)
-    recs = as_recordings(recordings)
+    recs = as_recordings(recordings, "thermal")
     terms = canonical_terms(model, terms)
     values = start_values(params, terms) | dict(start or {})
     fixed = default_fixed(terms) if fixed is None else tuple(fixed)

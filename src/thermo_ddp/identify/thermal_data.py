@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ..model import motor
-from .._config import require
+from .._config import checked_settings
 from ..errors import InputError
 from ..model.parameters import JointParameters
 from ..model.thermal import feature_key, feature_value
@@ -20,7 +20,10 @@ from ..recordings import Recording
 DRIVERS = (("current_sq_a2", 1.0), ("friction_w", 1.0), ("speed_abs_rad_s", 2.0), ("speed_abs_rad_s", 1.0))
 INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", feature_key(*DRIVERS[3]))
 
-@dataclasses.dataclass(frozen=True)
+@checked_settings("thermal settings", min_step_s="[0, inf)", max_step_s="(0, inf)", head_s="[0, inf)",
+                  gap_factor="(1, inf)", gap_window_s="(0, inf)", max_nfev="[1, inf)", chi2_tolerance="(0, 1]",
+                  thermometry_noise_v="(0, inf)", thermometry_min_current_a="(0, inf)",
+                  thermometry_max_velocity_rad_s="(0, inf)", sensor_noise_c="(0, inf)")
 class ThermalSettings:
     """Grid and optimiser settings.
 
@@ -55,18 +58,6 @@ class ThermalSettings:
     thermometry_max_velocity_rad_s: float = 0.05
     sensor_noise_c: float = 0.1
 
-    def __post_init__(self) -> None:
-        src = "thermal settings"
-        require(self.min_step_s >= 0, src, "min_step_s", self.min_step_s, "must be >= 0")
-        require(self.max_step_s > 0, src, "max_step_s", self.max_step_s, "must be > 0")
-        require(self.head_s >= 0, src, "head_s", self.head_s, "must be >= 0")
-        require(self.gap_factor > 1, src, "gap_factor", self.gap_factor, "must be > 1")
-        require(self.gap_window_s > 0, src, "gap_window_s", self.gap_window_s, "must be > 0")
-        require(self.max_nfev >= 1, src, "max_nfev", self.max_nfev, "must be >= 1")
-        require(0 < self.chi2_tolerance <= 1, src, "chi2_tolerance", self.chi2_tolerance, "must be in (0, 1]")
-        for name in ("thermometry_noise_v", "thermometry_min_current_a", "thermometry_max_velocity_rad_s",
-                     "sensor_noise_c"):
-            require(getattr(self, name) > 0, src, name, getattr(self, name), "must be > 0")
 
 
 @dataclasses.dataclass(frozen=True)
