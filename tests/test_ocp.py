@@ -104,3 +104,23 @@ def test_mx_functions_are_accepted():
     dyn = ca.Function("f", [X, U, P], [DYN(X, U, P)], ["x", "u", "p"], ["x_next"])
     pr = problem(dynamics=dyn)
     assert pr.functions.step(np.ones(2), 1.0, 0.0).shape == (2, 1)
+
+
+def test_knot_parameters_by_name():
+    """Blocks are read and written by name; wrong names and shapes are refused."""
+    from thermo_ddp.ocp import KnotParameters
+    layout = KnotParameters((("q_ref_rad", 2), ("weight", 1), ("ambient_c", 1)))
+    q_ref = np.arange(10.0).reshape(5, 2)
+    p = layout.values(5, q_ref_rad=q_ref, weight=3.0, ambient_c=np.linspace(20, 24, 5))
+    assert p.shape == (5, 4)
+    np.testing.assert_array_equal(p[:, layout.slice("q_ref_rad")], q_ref)
+    np.testing.assert_array_equal(p[:, layout.slice("ambient_c")].ravel(), np.linspace(20, 24, 5))
+    assert np.all(p[:, layout.slice("weight")] == 3.0)
+    sym = layout.symbols(ca.SX.sym("p", 4))
+    assert sym["q_ref_rad"].numel() == 2 and str(sym["ambient_c"]) == "p_3"
+    with pytest.raises(InputError, match="weight"):
+        layout.values(5, q_ref_rad=q_ref, ambient_c=20.0)
+    with pytest.raises(InputError, match="q_ref_rad"):
+        layout.values(5, q_ref_rad=np.zeros(3), weight=1.0, ambient_c=20.0)
+    with pytest.raises(InputError, match="names"):
+        KnotParameters((("a", 1), ("a", 2)))

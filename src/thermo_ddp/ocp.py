@@ -53,6 +53,68 @@ def _output_index(fun: ca.Function, preferred: str, where: str) -> int:
     raise InputError(where, "outputs", names, f"expected one output or an output named '{preferred}'")
 
 
+@dataclasses.dataclass(frozen=True)
+class KnotParameters:
+    """Names and sizes of the per-knot parameter vector ``p``: what a problem reads by name, and how a
+    caller builds the (N+1, np) array the solvers take, also by name."""
+
+    blocks: tuple[tuple[str, int], ...]
+
+    def __post_init__(self):
+        names = [name for name, _ in self.blocks]
+        if len(set(names)) != len(names) or any(not isinstance(n, str) or not n.isidentifier() for n in names):
+            raise InputError("KnotParameters", "names", names, "expected distinct identifier-like names")
+        if any(not isinstance(size, int) or size < 1 for _, size in self.blocks):
+            raise InputError("KnotParameters", "sizes", self.blocks, "expected sizes >= 1")
+
+    @property
+    def size(self) -> int:
+        return sum(size for _, size in self.blocks)
+
+    def slice(self, name: str) -> slice:
+        start = 0
+        for block, size in self.blocks:
+            if block == name:
+                return slice(start, start + size)
+            start += size
+        raise InputError("KnotParameters", "name", name, f"unknown parameter; known: {', '.join(self.names)}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(name for name, _ in self.blocks)
+
+    def symbols(self, p) -> dict[str, object]:
+        """``{name: p[its entries]}`` of a symbolic (or numeric) parameter vector."""
+        return {name: p[self.slice(name)] for name in self.names}
+
+    def values(self, knots: int, **values) -> np.ndarray:
+        """The (knots, size) array from every block by name: a scalar or a (size,) row for all knots, a
+        (knots,) column for a size-1 block, or a (knots, size) array."""
+        missing, unknown = set(self.names) - set(values), set(values) - set(self.names)
+        if missing or unknown:
+            name = sorted(missing or unknown)[0]
+            raise InputError("KnotParameters", name, "<missing>" if missing else values[name],
+                             f"expected exactly the parameters {', '.join(self.names)}")
+        out = np.empty((knots, self.size))
+        for name, size in self.blocks:
+            self.assign(out, name, values[name])
+        return out
+
+    def assign(self, params: np.ndarray, name: str, value) -> None:
+        """Set block ``name`` of a (knots, size) array in place (shapes as in :meth:`values`)."""
+        cols = self.slice(name)
+        size, knots = cols.stop - cols.start, params.shape[0]
+        arr = np.asarray(value, dtype=float)
+        if arr.shape in ((), (size,)):
+            arr = np.broadcast_to(arr, (knots, size))
+        elif arr.shape == (knots,) and size == 1:
+            arr = arr[:, None]
+        if arr.shape != (knots, size):
+            raise InputError("KnotParameters", name, f"array of shape {np.shape(value)}",
+                             f"expected a scalar, ({size},), or ({knots}, {size})")
+        params[:, cols] = arr
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class Cost:
     """Least-squares cost term 0.5 * sum(weight * r**2).
@@ -130,7 +192,8 @@ class OptimalControlProblem:
     control intervals N. ``u_lb``/``u_ub``: control box (None or +-inf for no bound).
     ``dynamics_jacobians`` (optional): the same inputs -> (x_next, A, B), e.g. analytic
     rigid-body derivatives; DDP then takes A = dx_next/dx and B = dx_next/du from it instead
-    of differentiating ``dynamics`` (which must describe the same step).
+    of differentiating ``dynamics`` (which must describe the same step). ``parameters`` (optional)
+    names the blocks of the per-knot parameter vector p (:class:`KnotParameters`).
     """
 
     dynamics: ca.Function
@@ -143,6 +206,7 @@ class OptimalControlProblem:
     u_ub: Sequence[float] | np.ndarray | None = None
     name: str = "ocp"
     dynamics_jacobians: ca.Function | None = None
+    parameters: KnotParameters | None = None
 
     def __post_init__(self):
         if not isinstance(self.dynamics, ca.Function):
@@ -162,6 +226,9 @@ class OptimalControlProblem:
         if len(set(names)) != len(names):
             raise InputError(_SRC, "names", names, "cost and constraint names must be unique")
         self._check_sizes()
+        if self.parameters is not None and self.parameters.size != self.n_params:
+            raise InputError(_SRC, "parameters", self.parameters.blocks, f"sizes add up to {self.parameters.size}, "
+                             f"the functions take {self.n_params}")
         self._set_bounds()
 
     # -- validation -------------------------------------------------------------------------

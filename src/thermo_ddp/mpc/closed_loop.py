@@ -240,8 +240,8 @@ class _Supervisor:
     def payload(self, m: Measurement, k: int) -> list[str]:
         """While holding still: the measured current against the model's static current (1 s averages)."""
         c = self.controller
-        task = c.task.with_hold(c.hold_s).params
-        if self.payload_reported or k >= task.shape[0] or task[k, 2] < 0.5 or np.max(np.abs(m.v_rad_s)) > 0.05:
+        holding = c.task.with_hold(c.hold_s).params[:, c.lp.problem.parameters.slice("hold_flag")].ravel()
+        if self.payload_reported or k >= holding.size or holding[k] < 0.5 or np.max(np.abs(m.v_rad_s)) > 0.05:
             self._ratios.clear()
             return []
         static = self.model.static_current_a(m.q_rad)
@@ -339,12 +339,22 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
     faults = sorted({e for names in r["events"] for e in names} - {"casing_repeat", "casing_missing"})
     if faults:
         message += f"; events: {', '.join(faults)}"
+    first = model.joints[0]
+
+    def logged(key):
+        return np.array(r[key])[:, 0]
+
     return ClosedLoopResult(
-        success, status, message, settings, np.arange(xs.shape[0]) * settings.control_period_s,
-        node("winding"), node("casing"), drive, xs[:, 0], xs[:, model.nu],
-        np.array(r["est"])[:, 0], np.array(r["std"])[:, 0], np.array(r["scale"]), np.array(r["casing"])[:, 0],
-        np.array(r["received"]), np.array(r["current"])[:, 0], np.array(r["voltage"])[:, 0],
-        np.array([s.solve_s for s in steps]), np.array([s.first_solve_s for s in steps]),
-        np.array([s.iterations for s in steps]), tuple(s.status for s in steps), np.array([s.hold_s for s in steps]),
-        float(peak), plant.safety_cutoff_c, tripped, np.array(r["x0"]), np.array(r["params"]),
-        tuple(r["measurements"]), tuple(r["events"]), np.array(r["tightening"], dtype=float))
+        success=success, status=status, message=message, settings=settings,
+        time_s=np.arange(xs.shape[0]) * settings.control_period_s,
+        winding_c=node("winding"), casing_c=node("casing"), drive_c=drive,
+        q_rad=xs[:, model.index(first, "q_rad")], v_rad_s=xs[:, model.index(first, "v_rad_s")],
+        estimated_winding_c=logged("est"), winding_std_c=logged("std"), resistance_scale=np.array(r["scale"]),
+        measured_casing_c=logged("casing"), casing_received=np.array(r["received"]),
+        current_a=logged("current"), voltage_v=logged("voltage"),
+        solve_s=np.array([s.solve_s for s in steps]), first_solve_s=np.array([s.first_solve_s for s in steps]),
+        iterations=np.array([s.iterations for s in steps]), step_status=tuple(s.status for s in steps),
+        hold_s=np.array([s.hold_s for s in steps]), peak_winding_c=float(peak),
+        safety_cutoff_c=plant.safety_cutoff_c, cutoff_tripped=tripped, planner_x0=np.array(r["x0"]),
+        planner_params=np.array(r["params"]), measurements=tuple(r["measurements"]), events=tuple(r["events"]),
+        tightening_c=np.array(r["tightening"], dtype=float))

@@ -127,9 +127,10 @@ class RecedingHorizonController:
         n = self.lp.problem.horizon + 1
         rows = task[k:k + n]
         window = np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)])
-        window[0, 2] = 0.0  # no hold band on the measured present state: no control can change it
+        layout = self.lp.problem.parameters
+        window[0, layout.slice("hold_flag")] = 0.0  # no hold band on the measured present state
         if self.ambient_c is not None:
-            window[:, 3] = self.ambient_c
+            layout.assign(window, "ambient_c", self.ambient_c)
         return window
 
     def planning_state(self, x_est: np.ndarray) -> np.ndarray:
@@ -173,8 +174,9 @@ class RecedingHorizonController:
             log.warning("no feasible initial plan (%s); applying the best iterate", result.status)
             status, events = "fallback", events + ("no_feasible_plan",)
         self.plan, self.plan_age, self.k = result, 0, 0
-        return ControlStep(self._clip(result.us[0]), status, result.status, total, first_s, iterations, solves,
-                           self.hold_s, result.cost, events)
+        return ControlStep(current_a=self._clip(result.us[0]), status=status, solver_status=result.status,
+                           solve_s=total, first_solve_s=first_s, iterations=iterations, solves=solves,
+                           hold_s=self.hold_s, cost=result.cost, events=events)
 
     def step(self, x_est: np.ndarray) -> ControlStep:
         """Advance one knot and re-solve from ``x_est`` (raised by ``tightening_c``), warm-started from the
@@ -210,9 +212,10 @@ class RecedingHorizonController:
                         "feedback%s", t, "too late" if late else "failed", result.status,
                         result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
                         ", derated to the no-heating current" if derated else "")
-        return ControlStep(self._clip(current), status, result.status, sum(r.solve_s for r in results),
-                           results[0].solve_s, sum(r.iterations for r in results), len(results), self.hold_s,
-                           result.cost, tuple(events))
+        return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
+                           solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
+                           iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
+                           cost=result.cost, events=tuple(events))
 
     def warm_start(self, shift: int = 1) -> WarmStart:
         """The plan shifted by ``shift`` knots with its multipliers; the AL penalty is capped at

@@ -478,7 +478,7 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
         run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model], model), show)
         log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
                  run.achieved_hold_s, run.margin_c)
-        executions.append(Execution(model, lim, plan, run))
+        executions.append(Execution(model=model, limit_c=lim, plan=plan, run=run))
     return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
 
 

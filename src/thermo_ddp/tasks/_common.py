@@ -97,7 +97,8 @@ def joint_limit_constraints(model: ActuatedArm, joint: str, x, current_a, limit_
 # --------------------------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class TaskProblem:
-    """A transcribed task: the OCP and its data (initial state, per-knot parameters, time grid).
+    """A transcribed task: the OCP and its data (initial state, per-knot parameters named by
+    ``problem.parameters``, with a ``q_ref_rad`` block, and the time grid).
 
     ``box_names``: the name of each control's current box (``current_peak``...)."""
 
@@ -111,10 +112,10 @@ class TaskProblem:
 
 def initial_guess(tp: TaskProblem) -> WarmStart:
     """States on the reference at the initial temperatures, currents from static gravity compensation."""
-    n = tp.model.nu
-    xs = np.tile(tp.x0, (tp.params.shape[0], 1))
-    xs[:, :n] = tp.params[:, :n]
-    us = np.array([tp.model.static_current_a(q) for q in tp.params[:-1, :n]])
+    q_ref = tp.params[:, tp.problem.parameters.slice("q_ref_rad")]
+    xs = np.tile(tp.x0, (q_ref.shape[0], 1))
+    xs[:, [tp.model.index(j, "q_rad") for j in tp.model.joints]] = q_ref
+    us = np.array([tp.model.static_current_a(q) for q in q_ref[:-1]])
     return WarmStart(xs, us)
 
 

@@ -27,13 +27,16 @@ from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW
 from ..model.integrators import rk4_substeps
 from ..model.parameters import load_parameters, packaged_parameter_file
-from ..ocp import Constraint, Cost, OptimalControlProblem
+from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c,
                       first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, limit_pair_c,
                       solver_summary, winding_limits_c)
 
 log = logging.getLogger(__name__)
+
+# Per-knot parameters of the lift: the angle to track and its weight, 1 on the hold's knots, the room.
+LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1)))
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # Full DDP: the winding limit's R(T) i^2 curvature lives in the dynamics, which Gauss-Newton
@@ -129,21 +132,22 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     flag = np.zeros(q_ref.size)
     first = k["lift"]
     flag[first:first + hold + 1] = 1.0  # the goal is reached at the end of the lift, held to its end
-    p = np.column_stack([q_ref, np.full(q_ref.size, settings.tracking_weight), flag,
-                         np.full(q_ref.size, ambient_c)])
+    p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
+                               hold_flag=flag, ambient_c=ambient_c)
     return p, (first, first + hold)
 
 
 def _functions(model: ActuatedArm, settings: LiftSettings):
     joint = model.joints[0]
     m = model.params[joint].motor
-    x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", 4)
+    x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", LIFT_PARAMETERS.size)
+    par = LIFT_PARAMETERS.symbols(p)
     q, v = x[model.index(joint, "q_rad")], x[model.index(joint, "v_rad_s")]
     winding = x[model.index(joint, "winding_c")]
     step = model.step(settings.dt_s, settings.integrator)
-    dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, p[3])], ["x", "u", "p"], ["x_next"])
+    dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, par["ambient_c"])], ["x", "u", "p"], ["x_next"])
     jac = model.step_jacobians(settings.dt_s, settings.integrator)
-    dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, p[3])), ["x", "u", "p"],
+    dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
     vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])
     tol, goal, start = settings.hold_tolerance_rad, settings.goal_rad, settings.start_rad
@@ -155,7 +159,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
 
     costs = (
-        Cost("tracking", 1.0, stage("tracking", ca.sqrt(p[1]) * (q - p[0]))),
+        Cost("tracking", 1.0, stage("tracking", ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"]))),
         Cost("joule_energy", settings.energy_weight,
              stage("joule_energy", ca.sqrt(motor.resistance_ohm(m, winding) * settings.dt_s) * u[0])),
         Cost("velocity", settings.velocity_weight, stage("velocity", v)),
@@ -164,7 +168,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
                       Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
     limits = joint_limit_constraints(model, joint, x, u[0], settings.limit_c, vmax)
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
-        Constraint("hold_band", stage("hold_band", ca.vertcat(p[2] * (q - goal) - tol, p[2] * (goal - q) - tol), "g")),
+        Constraint("hold_band", stage("hold_band", ca.vertcat(par["hold_flag"] * (q - goal) - tol,
+                                                             par["hold_flag"] * (goal - q) - tol), "g")),
     )
     terminal_constraints = (
         Constraint("terminal_winding_limit", terminal("terminal_winding_limit", limits["winding_limit"], "g")),
@@ -179,8 +184,8 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
     settings = dataclasses.replace(settings, limit_c=winding_limits_c(model, settings.limit_c)[model.joints[0]])
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
     dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
-    problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons,
-                                    u_lb=[-peak], u_ub=[peak], name="lift", dynamics_jacobians=dyn_jac)
+    problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons, u_lb=[-peak], u_ub=[peak],
+                                    name="lift", dynamics_jacobians=dyn_jac, parameters=LIFT_PARAMETERS)
     x0 = model.state(q=[settings.start_rad])
     return LiftProblem(model=model, problem=problem, x0=x0, params=params,
                        time_s=np.arange(params.shape[0]) * settings.dt_s, box_names=("current_peak",),

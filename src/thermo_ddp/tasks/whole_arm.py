@@ -28,7 +28,7 @@ from .._config import require, settings_from_mapping
 from ..model import motor
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, LEFT_ARM
-from ..ocp import Constraint, Cost, OptimalControlProblem
+from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, WarmStart
 from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c, finite_or_none,
                       format_s, initial_guess, is_feasible, joint_limit_constraints, limiting_joint, solver_summary,
@@ -143,28 +143,38 @@ def _joint_constraints(model, x, u, p, limits_c, vmax):
     return out
 
 
+def hold_parameters(joints: int) -> KnotParameters:
+    """Per-knot parameters of the hold: each joint's reference angle, the tracking weight, 1 on the
+    hold's knots, the room."""
+    return KnotParameters((("q_ref_rad", joints), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1)))
+
+
 def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, target_m, dt_s: float) -> HoldProblem:
     """Move from the hanging posture to ``q_goal`` in ``move_s`` (min-jerk reference), then hold ``hold_s``
     with the payload inside the ``hold_band`` around ``target_m``; every joint's limits as constraints."""
     n, s = model.nu, settings
     limits = winding_limits_c(model, s.limit_c)
-    x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", n), ca.SX.sym("p", n + 3)
+    layout = hold_parameters(n)
+    x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", n), ca.SX.sym("p", layout.size)
+    par = layout.symbols(p)
     step, jac = model.step(dt_s), model.step_jacobians(dt_s)
-    dyn = _stage("hold_dynamics", x, u, p, step(x, u, p[n + 2]), "x_next")
-    dyn_jac = ca.Function("hold_dynamics_jacobians", [x, u, p], list(jac(x, u, p[n + 2])), ["x", "u", "p"],
+    dyn = _stage("hold_dynamics", x, u, p, step(x, u, par["ambient_c"]), "x_next")
+    dyn_jac = ca.Function("hold_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
     q = x[[model.index(j, "q_rad") for j in model.joints]]
     v = x[[model.index(j, "v_rad_s") for j in model.joints]]
     w = x[[model.index(j, "winding_c") for j in model.joints]]
     res = ca.vertcat(*[motor.resistance_ohm(model.params[j].motor, w[k]) for k, j in enumerate(model.joints)])
-    costs = (Cost("tracking", 1.0, _stage("tracking", x, u, p, ca.sqrt(p[n]) * (q - p[:n]), "r")),
+    tracking = ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"])
+    costs = (Cost("tracking", 1.0, _stage("tracking", x, u, p, tracking, "r")),
              Cost("joule_energy", s.energy_weight, _stage("joule_energy", x, u, p, ca.sqrt(res * dt_s) * u, "r")),
              Cost("velocity", s.velocity_weight, _stage("velocity", x, u, p, v, "r")))
-    tcosts = (Cost("terminal_tracking", s.tracking_weight, _terminal("terminal_tracking", x, p, q - p[:n], "r")),
+    tcosts = (Cost("terminal_tracking", s.tracking_weight,
+                   _terminal("terminal_tracking", x, p, q - par["q_ref_rad"], "r")),
               Cost("terminal_velocity", 1.0, _terminal("terminal_velocity", x, p, v, "r")))
     point = payload_point_function(model)(q)
     target, tol = ca.DM(np.asarray(target_m, float)), s.target_tolerance_m
-    band = ca.vertcat(p[n + 1] * (point - target) - tol, p[n + 1] * (target - point) - tol)
+    band = ca.vertcat(par["hold_flag"] * (point - target) - tol, par["hold_flag"] * (target - point) - tol)
     vmax = np.asarray(model.arm.model.velocityLimit, float)
     w_max = ca.DM([limits[j] for j in model.joints])
     cons = tuple(_joint_constraints(model, x, u, p, limits, vmax)) + (
@@ -174,13 +184,13 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
     peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
     move, hold = int(round(s.move_s / dt_s)), int(round(s.hold_s / dt_s))
     problem = OptimalControlProblem(dyn, move + hold, costs, tcosts, cons, tcons, u_lb=-peak, u_ub=peak,
-                                    name=f"whole_arm_{n}", dynamics_jacobians=dyn_jac)
+                                    name=f"whole_arm_{n}", dynamics_jacobians=dyn_jac, parameters=layout)
     start = hanging_posture(model, s.range_margin_rad)
     q_ref = np.vstack([start + np.outer(min_jerk(np.arange(move + 1) / move), np.asarray(q_goal) - start),
                        np.tile(q_goal, (hold, 1))])
     flag = (np.arange(move + hold + 1) >= move).astype(float)
-    params = np.column_stack([q_ref, np.full(move + hold + 1, s.tracking_weight), flag,
-                              np.full(move + hold + 1, model.ambient_c)])
+    params = layout.values(move + hold + 1, q_ref_rad=q_ref, tracking_weight=s.tracking_weight, hold_flag=flag,
+                           ambient_c=model.ambient_c)
     return HoldProblem(model=model, problem=problem, x0=model.state(q=start), params=params,
                        time_s=np.arange(move + hold + 1) * dt_s,
                        box_names=tuple(f"current_peak_{j}" for j in model.joints), dt_s=dt_s, hold_knot=move,
