@@ -7,8 +7,10 @@ and controller): the hold achieved is reported as a fraction of that nominal hol
 from __future__ import annotations
 
 import dataclasses
+import functools
 import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -19,12 +21,11 @@ from ..mpc.controller import mpc_solver, planning_problem
 from ..mpc.closed_loop import build_models
 from ..mpc.observer import ObserverSettings
 from ..mpc.settings import MPCSettings
+from ..model.parameters import THERMAL_KEYS as FILE_THERMAL_KEYS
 
 # [thermal] values drawn independently in +-THERMAL_SPREAD (every numeric one but the room and the
 # friction-heat share); the planner keeps the file's values.
-THERMAL_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w",
-                "casing_ambient_k_per_w", "drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w",
-                "drive_idle_w", "drive_loss_w_per_a2")
+THERMAL_KEYS = FILE_THERMAL_KEYS["two_node_drive"]
 THERMAL_SPREAD, FRICTION_SPREAD = 0.25, 0.30
 INITIAL_C = (30.0, 60.0)
 
@@ -34,9 +35,6 @@ INITIAL_C = (30.0, 60.0)
 CONTROLLER = dict(hold_s=15.0, observe_voltage=True, observer_start="settled", uncertainty_sigmas=2.0,
                   plant_resistance_scale=1.0)
 OBSERVER = ObserverSettings(winding_c=0.3, initial_resistance_scale=0.15)
-
-_solver = None
-
 
 def draw(run: int, seed: int = 0) -> dict[str, Any]:
     """The randomised plant and sensors of run ``run`` (MPCSettings fields)."""
@@ -52,24 +50,23 @@ def draw(run: int, seed: int = 0) -> dict[str, Any]:
             "seed": int(run)}
 
 
-def _init():
-    global _solver
+@functools.cache
+def controller_solver():
+    """The sweep controller's solver, built once per process (its compiled passes come from the disk cache)."""
     settings = MPCSettings(**CONTROLLER)
     model, _ = build_models(settings)
-    _solver = mpc_solver(planning_problem(settings, model), settings)
+    return mpc_solver(planning_problem(settings, model), settings)
 
 
-def one_run(args: tuple[int, int]) -> dict[str, Any]:
-    """The randomised run and its nominal twin; figures only (picklable)."""
-    run, seed = args
-    if _solver is None:
-        _init()
+def one_run(run: int, seed: int) -> dict[str, Any]:
+    """The randomised run and its nominal twin: a pure function of (run, seed); figures only (picklable)."""
+    solver = controller_solver()
     d = draw(run, seed)
     settings = MPCSettings(**CONTROLLER, **d)
     nominal = MPCSettings(**CONTROLLER, plant_initial_c=d["plant_initial_c"], seed=int(run))
     t0 = time.perf_counter()
-    r = run_closed_loop(settings, solver=_solver, observer=OBSERVER, progress=False)
-    n = run_closed_loop(nominal, solver=_solver, observer=OBSERVER, progress=False)
+    r = run_closed_loop(settings, solver=solver, observer=OBSERVER, progress=False)
+    n = run_closed_loop(nominal, solver=solver, observer=OBSERVER, progress=False)
     return {"run": run, "draw": {**d, "plant_thermal_scales": dict(d["plant_thermal_scales"])},
             "status": r.status, "violation": bool(r.peak_winding_c > r.limit_c), "tripped": bool(r.cutoff_tripped),
             "margin_c": float(r.margin_c), "peak_winding_c": float(r.peak_winding_c),
@@ -83,12 +80,14 @@ def one_run(args: tuple[int, int]) -> dict[str, Any]:
 def robustness_sweep(runs: int = 200, workers: int = 2, seed: int = 0, progress: bool = True) -> dict[str, Any]:
     """``runs`` randomised closed loops on ``workers`` processes; the figures and every run."""
     started = time.perf_counter()
-    jobs = [(i, seed) for i in range(runs)]
+    indices = range(runs)
     if workers > 1:
-        with multiprocessing.get_context("fork").Pool(workers, initializer=_init) as pool:
-            results = list(tqdm(pool.imap(one_run, jobs), total=runs, desc="sweep", disable=not progress))
+        # spawned workers inherit nothing: each run is rebuilt from its arguments alone
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            results = list(tqdm(pool.map(one_run, indices, [seed] * runs), total=runs, desc="sweep",
+                                disable=not progress))
     else:
-        results = [one_run(j) for j in tqdm(jobs, desc="sweep", disable=not progress)]
+        results = [one_run(i, seed) for i in tqdm(indices, desc="sweep", disable=not progress)]
     holds = np.array([r["hold_s"] / r["nominal_hold_s"] if r["nominal_hold_s"] > 0 else np.nan for r in results])
     return {"runs": runs, "workers": workers, "seed": seed,
             "violations": int(sum(r["violation"] for r in results)),
