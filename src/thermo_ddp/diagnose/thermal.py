@@ -14,7 +14,7 @@ drive_heating       a drive node heated by idle + i^2 losses, coupled to the    
                     casing and ambient: raises idle temperature, slows cooling
                     (implies the casing node: the drive heats the casing)
 copper_resistance   free temperature coefficient of R(T) (eq. 3)                ``[motor] copper_alpha_per_k``
-iron_losses         speed-dependent loss k v^2 in the winding                   none (recorded in [sources])
+iron_losses         speed-dependent loss k v^2 in the winding                   ``[thermal] iron_loss_w`` (+ ref speed, exponent 2)
 ==================  =========================================================  =========================
 
 Each candidate is refitted (output error, :mod:`thermo_ddp.identify.thermal`) and accepted only if
@@ -277,8 +277,6 @@ class ThermalDiagnosis(SelectedTerms):
         lines += [f"final {sel.final.fit.model}: rmse {sel.final.fit.rmse:.4g} K; held-out rmse "
                   f"{sel.baseline.cv_rmse:.4g} -> {sel.final.cv_rmse:.4g} K; "
                   f"{len(sel.final_localisation.mismatches)} unexplained intervals", self.final_fit.fit_report()]
-        if IRON_KEY in self.final_fit.parameters:
-            lines.append("warning: iron_losses has no key in the contract parameter file; the planner ignores it")
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 3) -> Path:
