@@ -54,7 +54,7 @@ def ddp_warm(settings):
     def warm(prev):
         w = WarmStart.from_result(prev, shift=1)
         mult = dict(w.multipliers)
-        mult["penalty"] = min(float(mult["penalty"]), settings.warm_penalty_max)
+        mult["penalty"] = min(float(mult["penalty"]), settings.controller.warm_penalty_max)
         return WarmStart(w.xs, w.us, mult)
     return warm
 
@@ -72,7 +72,7 @@ def main():
     ap.add_argument("--hold-s", type=float, default=12.0)
     ap.add_argument("--plot", default=None)
     args = ap.parse_args()
-    settings = MPCSettings(hold_s=args.hold_s)
+    settings = MPCSettings.from_options(hold_s=args.hold_s)
     loop = run_closed_loop(settings)
     print(loop.report())
     if args.plot:
@@ -87,8 +87,8 @@ def main():
     d, i = stats(ddp_runs), stats(ipopt_runs)
     cost_gap = [abs(a.cost - b.cost) / abs(b.cost) for a, b in zip(ddp_runs, ipopt_runs) if a.success and b.success]
     payload = {
-        "problem": f"elbow lift {settings.payload_kg:g} kg, nx={lp.problem.nx}, nu=1, N={lp.problem.horizon}, "
-                   f"{settings.integrator} dt={settings.control_period_s} s, "
+        "problem": f"elbow lift {settings.scenario.payload_kg:g} kg, nx={lp.problem.nx}, nu=1, N={lp.problem.horizon}, "
+                   f"{settings.controller.integrator} dt={settings.controller.control_period_s} s, "
                    f"winding limit {settings.planning_limit_c} °C (planning), full-second-order DDP",
         "periods": int(len(ddp_runs)),
         "warm_step": {"ddp": d, "ipopt": i, "ipopt_over_ddp_median": i["median_s"] / d["median_s"],

@@ -39,7 +39,7 @@ VELOCITY_DISTURBANCE = 1e-2  # rad/s, standard deviation
 def mpc_loop(limit_c: float, steps: int, repeats: int) -> dict:
     lp = lift_problem(KNOTS, limit_c)
     solvers = {name: make_solver(lp, name) for name in SOLVERS}
-    solvers["ddp"] = make_solver(lp, "ddp", mpc_ddp_settings(MPCSettings().max_iterations))  # the controller's
+    solvers["ddp"] = make_solver(lp, "ddp", mpc_ddp_settings(MPCSettings().controller.max_iterations))  # the controller's
     first = {name: s.solve(lp.x0, lp.params, initial_guess(lp)) for name, s in solvers.items()}
     long_params = np.vstack([lp.params, np.repeat(lp.params[-1:], steps, axis=0)])
     rng = np.random.default_rng(0)

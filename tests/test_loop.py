@@ -42,7 +42,7 @@ def test_settings_are_validated():
     with pytest.raises(InputError):
         LoopSettings(limits_c=())
     # the default window spans the whole task (lift 2 s + hold + lower 2 s + settle 0.5 s at 0.1 s)
-    assert mpc_settings(LoopSettings(hold_s=60.0), 84.0, "x.toml").horizon_knots == 645
+    assert mpc_settings(LoopSettings(hold_s=60.0), 84.0, "x.toml").controller.horizon_knots == 645
 
 
 @pytest.mark.parametrize("effects", ["both", "friction", "drive", "none"])

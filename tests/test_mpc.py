@@ -23,8 +23,8 @@ HOLD_S = 12.0  # longer than the plant can hold under 84 °C (the nominal model 
 @pytest.fixture(scope="module")
 def mismatched():
     """Plant resistances +15 %, casing noise 0.1 °C and 0.1 °C quantisation (the defaults), planned at 84."""
-    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S)
-    assert settings.plant_resistance_scale == 1.15 and settings.casing_quantum_c == 0.1
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
+    assert settings.plant.plant_resistance_scale == 1.15 and settings.sensors.casing_quantum_c == 0.1
     return run_closed_loop(settings, progress=False)
 
 
@@ -34,13 +34,13 @@ def test_settings_are_validated_and_unknown_options_raise():
     for bad in ({"backoff_c": -1.0}, {"integrator": "euler"}, {"horizon_knots": 2.5},
                 {"casing_dropout_probability": 1.0}, {"plant_resistance_scale": 0.0}):
         with pytest.raises(InputError):
-            MPCSettings(**bad)
+            MPCSettings.from_options(**bad)
     with pytest.raises(InputError, match="horizon_knots"):  # the window must hold lift + lower + settle
-        planning_problem(MPCSettings(horizon_knots=40), build_models(MPCSettings())[0])
+        planning_problem(MPCSettings.from_options(horizon_knots=40), build_models(MPCSettings())[0])
 
 
 def test_plant_differs_from_the_planner_by_the_resistance_scale():
-    model, plant = build_models(MPCSettings(plant_resistance_scale=1.15))
+    model, plant = build_models(MPCSettings.from_options(plant_resistance_scale=1.15))
     joint = model.joints[0]
     nominal, real = model.params[joint].thermal.values, plant.params[joint].thermal.values
     for key, value in nominal.items():
@@ -68,14 +68,14 @@ def test_scaled_observer_model_is_the_model_at_its_scale():
 
 
 def test_casing_sensor_is_noisy_and_quantised():
-    settings = MPCSettings(casing_noise_c=0.1, casing_quantum_c=0.1)
+    settings = MPCSettings.from_options(casing_noise_c=0.1, casing_quantum_c=0.1)
     model, _ = build_models(settings)
     plant = Plant(model, model.state(q=[-0.05]), settings, np.random.default_rng(0))
     samples = np.array([plant.measure().casing_c[0] for _ in range(2000)])
     assert np.allclose(samples / 0.1, np.round(samples / 0.1), atol=1e-9)
     true = model.state(q=[-0.05])[model.index(model.joints[0], "casing_c")]
     assert abs(samples.mean() - true) < 0.01 and 0.09 < samples.std() < 0.12
-    delayed = Plant(model, model.state(q=[-0.05]), dataclasses.replace(settings, casing_delay_steps=2),
+    delayed = Plant(model, model.state(q=[-0.05]), settings.replace(casing_delay_steps=2),
                     np.random.default_rng(0))
     assert [delayed.measure().casing_c is None for _ in range(3)] == [True, True, False]
 
@@ -99,15 +99,15 @@ def test_closed_loop_keeps_the_true_winding_under_the_limit_with_a_mismatched_pl
 
 def test_without_the_resistance_scale_and_back_off_the_limit_is_exceeded(mismatched):
     """Counterfactual: the plain EKF under-estimates the hotter winding; planning right at 84 overheats."""
-    r = run_closed_loop(MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, backoff_c=0.0, estimate_resistance_scale=False),
-                        progress=False)
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S, backoff_c=0.0, estimate_resistance_scale=False)
+    r = run_closed_loop(settings, progress=False)
     assert r.status == "winding_limit_exceeded" and not r.success
     assert r.estimation_error_c.min() < -0.8  # biased low by the 15 % resistance mismatch
     assert r.peak_winding_c > mismatched.peak_winding_c
 
 
 def test_closed_loop_with_sensor_delay_and_dropouts():
-    r = run_closed_loop(MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, casing_delay_steps=3,
+    r = run_closed_loop(MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S, casing_delay_steps=3,
                                     casing_dropout_probability=0.3, seed=3), progress=False)
     assert r.success and r.peak_winding_c <= LIMIT_C and not r.cutoff_tripped
     assert 0.5 < r.casing_received.mean() < 0.9
@@ -115,7 +115,7 @@ def test_closed_loop_with_sensor_delay_and_dropouts():
 
 def test_ekf_converges_to_the_true_winding_on_a_matched_model():
     """Matched plant; the filter re-run on the recorded measurements from a 5 K wrong winding converges."""
-    settings = MPCSettings(limit_c=LIMIT_C, hold_s=8.0, plant_resistance_scale=1.0, extra_s=150.0)
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=8.0, plant_resistance_scale=1.0, extra_s=150.0)
     r = run_closed_loop(settings, progress=False)
     assert np.abs(r.estimation_error_c).max() < 0.3  # the online filter, started at the idle equilibrium
     model, _ = build_models(settings)
@@ -138,7 +138,7 @@ def test_ekf_converges_to_the_true_winding_on_a_matched_model():
 def test_warm_started_resolve_equals_a_cold_solve_from_the_same_state():
     """Mid-hold with the winding limit active, the model as plant: the re-solve warm-started from the
     previous plan shifted by one knot reaches the cold solve's cost (and IPOPT's)."""
-    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S)
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
     model, _ = build_models(settings)
     lp = planning_problem(settings, model)
     controller = RecedingHorizonController(lp, settings, mpc_solver(lp, settings))

@@ -16,7 +16,7 @@ LIMIT_C, HOLD_S, DT = 84.0, 12.0, 0.1
 
 
 def run(**faults):
-    return run_closed_loop(MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, **faults), progress=False)
+    return run_closed_loop(MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S, **faults), progress=False)
 
 
 def periods_with(result, name):
@@ -64,8 +64,9 @@ def test_measurement_delay_of_one_second_is_compensated(nominal):
     casing = model.node_indices("casing")
 
     def casing_error(delay):
-        ekf = ExtendedKalmanFilter(model, MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, casing_delay_steps=10,
-                                                      observer_delay_steps=delay))
+        settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S, casing_delay_steps=10,
+                                            observer_delay_steps=delay)
+        ekf = ExtendedKalmanFilter(model, settings)
         ekf.initialise(r.measurements[0])
         errors = []
         for m, true in zip(r.measurements[1:], r.casing_c[1:]):
@@ -83,18 +84,19 @@ def test_stuck_sensor_is_detected_distrusted_and_backed_off(nominal):
     r = run(casing_stuck_time_s=stuck_at, seed=1)
     assert_safe(r)
     detected = periods_with(r, "casing_stuck")
-    n = stuck_run_length(r.settings.casing_noise_c, r.settings.casing_quantum_c, r.settings.stuck_false_alarm)
+    sensors = r.settings.sensors
+    n = stuck_run_length(sensors.casing_noise_c, sensors.casing_quantum_c, r.settings.estimator.stuck_false_alarm)
     assert detected.size == 1 and stuck_at < r.time_s[detected[0] + 1] <= stuck_at + (n + 1) * DT
     after = np.arange(detected[0] + 1, len(r.events))
     assert all("casing_distrusted" in r.events[k] for k in after)
-    assert np.allclose(r.tightening_c[after], r.settings.sensor_fault_backoff_c)   # larger back-off
-    assert r.margin_c > r.settings.sensor_fault_backoff_c                          # it was used
+    assert np.allclose(r.tightening_c[after], r.settings.controller.sensor_fault_backoff_c)   # larger back-off
+    assert r.margin_c > r.settings.controller.sensor_fault_backoff_c                          # it was used
     assert r.hold_s[-1] < nominal.hold_s[-1]
     assert "casing_stuck" not in nominal.event_counts() and "casing_distrusted" not in nominal.event_counts()
 
 
 def test_failed_and_late_solves_fall_back_to_the_previous_plan():
-    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S, max_solve_s=0.5)
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S, max_solve_s=0.5)
     lp = planning_problem(settings, build_models(settings)[0])
     solver = FaultySolver(mpc_solver(lp, settings), fail_calls=range(30, 90), late_calls=(120, 121), late_s=1.0)
     r = run_closed_loop(settings, solver=solver, progress=False)
@@ -111,7 +113,7 @@ def test_failed_and_late_solves_fall_back_to_the_previous_plan():
 def test_solver_outage_at_the_limit_derates_the_current():
     """Every re-solve fails from mid-hold on: the previous plan's feedback, capped at the no-heating current
     once the winding is at the planning limit."""
-    settings = MPCSettings(limit_c=LIMIT_C, hold_s=HOLD_S)
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
     lp = planning_problem(settings, build_models(settings)[0])
     solver = FaultySolver(mpc_solver(lp, settings), fail_calls=range(100, 10_000))
     r = run_closed_loop(settings, solver=solver, progress=False)

@@ -4,8 +4,10 @@ from .controller import ControlStep, RecedingHorizonController, mpc_solver, plan
 from .faults import FaultySolver
 from .observer import CasingMonitor, ExtendedKalmanFilter, ObserverSettings, scaled_ode, stuck_run_length
 from .plant import Measurement, Plant, perturbed_model
-from .settings import MPCSettings
+from .settings import (ControllerSettings, EstimatorSettings, MPCSettings, PlantSettings, ScenarioSettings,
+                       SensorSettings)
 
-__all__ = ["CasingMonitor", "ClosedLoopResult", "ControlStep", "ExtendedKalmanFilter", "FaultySolver", "MPCSettings", "Measurement",
-           "ObserverSettings", "Plant", "RecedingHorizonController", "build_models", "mpc_solver", "perturbed_model",
-           "planning_problem", "run_closed_loop", "scaled_ode", "stuck_run_length"]
+__all__ = ["CasingMonitor", "ClosedLoopResult", "ControlStep", "ControllerSettings", "EstimatorSettings",
+           "ExtendedKalmanFilter", "FaultySolver", "MPCSettings", "Measurement", "ObserverSettings", "Plant",
+           "PlantSettings", "RecedingHorizonController", "ScenarioSettings", "SensorSettings", "build_models",
+           "mpc_solver", "perturbed_model", "planning_problem", "run_closed_loop", "scaled_ode", "stuck_run_length"]

@@ -10,16 +10,15 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from .._config import settings_from_mapping
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW
+from ..tasks._common import default_limit_c
 from .controller import ControlStep, RecedingHorizonController, planning_problem
 from .observer import ExtendedKalmanFilter, ObserverSettings
 from .plant import Measurement, Plant, perturbed_model
 from .settings import MPCSettings
 
 log = logging.getLogger(__name__)
-_SRC = "run_closed_loop"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +84,7 @@ class ClosedLoopResult:
 
     @property
     def time_over_limit_s(self) -> float:
-        return float(np.sum(self.winding_c > self.limit_c) * self.settings.control_period_s)
+        return float(np.sum(self.winding_c > self.limit_c) * self.settings.controller.control_period_s)
 
     @property
     def margin_c(self) -> float:
@@ -117,7 +116,7 @@ class ClosedLoopResult:
                 "peak_winding_c": self.peak_winding_c, "margin_c": self.margin_c,
                 "peak_casing_measured_c": float(self.measured_casing_c.max()),
                 "cutoff_tripped": self.cutoff_tripped, "safety_cutoff_c": self.safety_cutoff_c,
-                "requested_hold_s": self.settings.hold_s, "planned_hold_s": float(self.hold_s[-1]),
+                "requested_hold_s": self.settings.scenario.hold_s, "planned_hold_s": float(self.hold_s[-1]),
                 "max_abs_estimation_error_c": float(np.abs(self.estimation_error_c).max()),
                 "final_resistance_scale": float(self.resistance_scale[-1]),
                 "warm_solve_median_s": float(np.median(warm)) if warm.size else None,
@@ -146,17 +145,17 @@ class ClosedLoopResult:
         warm = "n/a" if s["warm_solve_median_s"] is None else \
             f"{1e3 * s['warm_solve_median_s']:.2f} ms median, {1e3 * s['warm_solve_max_s']:.2f} ms max"
         return "\n".join([
-            f"closed-loop lift {self.settings.payload_kg:g} kg, winding limit {self.limit_c:g} °C "
+            f"closed-loop lift {self.settings.scenario.payload_kg:g} kg, winding limit {self.limit_c:g} °C "
             f"(planned at {self.settings.planning_limit_c:g} °C): {'SUCCESS' if self.success else 'FAILURE'} "
             f"({self.status})",
             f"  {self.message}",
             f"  peak TRUE winding {self.peak_winding_c:.2f} °C, margin {self.margin_c:.2f} K; "
             f"largest |estimate - true| {s['max_abs_estimation_error_c']:.2f} K; "
             f"resistance scale estimate {s['final_resistance_scale']:.3f} "
-            f"(plant {self.settings.plant_resistance_scale:g})",
+            f"(plant {self.settings.plant.plant_resistance_scale:g})",
             f"  measured casing peak {s['peak_casing_measured_c']:.1f} °C, cut-off {self.safety_cutoff_c:g} °C "
             f"{'TRIPPED' if self.cutoff_tripped else 'not tripped'}",
-            f"  hold requested {self.settings.hold_s:.1f} s, planned {s['planned_hold_s']:.1f} s",
+            f"  hold requested {self.settings.scenario.hold_s:.1f} s, planned {s['planned_hold_s']:.1f} s",
             f"  warm re-solves: {warm}; median {s['median_iterations']} iterations; "
             f"periods: {', '.join(f'{k} {v}' for k, v in s['step_status'].items())}",
             "  events: " + (", ".join(f"{name} x{e['count']} (first at {e['first_s']:.1f} s)"
@@ -195,11 +194,11 @@ class _Log:
 
 def build_models(settings: MPCSettings) -> tuple[ActuatedArm, ActuatedArm]:
     """The planner's model and the plant's (thermal values, friction and payload scaled)."""
-    files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
-    model = load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
-    return model, perturbed_model(model, settings.plant_resistance_scale, settings.plant_capacity_scale,
-                                  dict(settings.plant_thermal_scales), settings.plant_friction_scale,
-                                  settings.plant_payload_scale)
+    files = {ELBOW: settings.scenario.parameter_file} if settings.scenario.parameter_file else None
+    model = load_model((ELBOW,), payload_kg=settings.scenario.payload_kg, parameter_files=files)
+    return model, perturbed_model(model, settings.plant.plant_resistance_scale, settings.plant.plant_capacity_scale,
+                                  dict(settings.plant.plant_thermal_scales), settings.plant.plant_friction_scale,
+                                  settings.plant.plant_payload_scale)
 
 
 class _Supervisor:
@@ -211,7 +210,8 @@ class _Supervisor:
         self.settings, self.model, self.controller, self.ekf = settings, model, controller, ekf
         self.room_c: float | None = None
         self.assumed_c = model.ambient_c
-        self._room: collections.deque = collections.deque(maxlen=max(1, round(1.0 / settings.control_period_s)))
+        per_second = max(1, round(1.0 / settings.controller.control_period_s))
+        self._room: collections.deque = collections.deque(maxlen=per_second)
         self._ratios: list[float] = []
         self.payload_reported = False
 
@@ -221,7 +221,7 @@ class _Supervisor:
         if m.ambient_c is None or not np.isfinite(m.ambient_c):
             return []
         self._room.append(m.ambient_c)
-        if abs(float(np.median(self._room)) - self.assumed_c) <= self.settings.ambient_change_c:
+        if abs(float(np.median(self._room)) - self.assumed_c) <= self.settings.controller.ambient_change_c:
             return []
         self.room_c = float(np.median(list(self._room)[-3:]))   # the new level: the latest samples
         log.warning("t = %.1f s: room %.1f °C, planner assumed %.1f °C: following it", m.time_s, self.room_c,
@@ -230,10 +230,10 @@ class _Supervisor:
         return ["ambient_change"]
 
     def tighten(self) -> float:
-        s, ekf = self.settings, self.ekf
-        t = s.uncertainty_sigmas * float(np.max(ekf.winding_std_c))
+        c, ekf = self.settings.controller, self.ekf
+        t = c.uncertainty_sigmas * float(np.max(ekf.winding_std_c))
         if not ekf.monitor.trusted:
-            t += s.sensor_fault_backoff_c
+            t += c.sensor_fault_backoff_c
         self.controller.tightening_c = t
         return t
 
@@ -246,15 +246,15 @@ class _Supervisor:
             return []
         static = self.model.static_current_a(m.q_rad)
         self._ratios.append(float(np.mean(m.current_a / static)))
-        if len(self._ratios) < round(1.0 / self.settings.control_period_s):
+        if len(self._ratios) < round(1.0 / self.settings.controller.control_period_s):
             return []
         ratio = float(np.mean(self._ratios))
         self._ratios.clear()
-        if abs(ratio - 1) <= self.settings.payload_mismatch_tolerance:
+        if abs(ratio - 1) <= self.settings.estimator.payload_mismatch_tolerance:
             return []
         self.payload_reported = True
         log.warning("t = %.1f s: holding takes %.0f %% of the model's current: the payload differs from the "
-                    "planned %.1f kg", m.time_s, 100 * ratio, self.settings.payload_kg)
+                    "planned %.1f kg", m.time_s, 100 * ratio, self.settings.scenario.payload_kg)
         return ["payload_mismatch"]
 
 
@@ -266,20 +266,21 @@ def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observe
     ``plant_model``: the robot's own model (e.g. a simulated robot's true physics) instead of the planner's
     model perturbed by the settings' plant scales."""
     if settings is None:
-        settings = settings_from_mapping(MPCSettings, options, _SRC)
+        settings = MPCSettings.from_options(**options)
     elif options:
         raise TypeError("give either settings or options, not both")
     model, perturbed = build_models(settings)
+    settings = settings.with_default_limit(default_limit_c(model.params[ELBOW]))
     plant_model = plant_model or perturbed
     lp = planning_problem(settings, model)
     controller = RecedingHorizonController(lp, settings, solver)
-    rng = np.random.default_rng(settings.seed)
-    temps = None if settings.plant_initial_c is None else np.full(plant_model.nx - 2 * plant_model.nu,
-                                                                   settings.plant_initial_c)
+    rng = np.random.default_rng(settings.scenario.seed)
+    temps = None if settings.plant.plant_initial_c is None else np.full(plant_model.nx - 2 * plant_model.nu,
+                                                                   settings.plant.plant_initial_c)
     plant = Plant(plant_model, plant_model.state(q=[lp.settings.start_rad], temperatures_c=temps), settings, rng)
     ekf = ExtendedKalmanFilter(model, settings, observer or ObserverSettings())
     supervisor = _Supervisor(settings, model, controller, ekf)
-    steps = controller.task_knots + int(round(settings.extra_s / settings.control_period_s))
+    steps = controller.task_knots + int(round(settings.scenario.extra_s / settings.controller.control_period_s))
     m = plant.measure()
     while m.casing_c is None or not np.all(np.isfinite(m.casing_c)):  # wait at rest for the first sample
         plant.apply(np.zeros(model.nu))
@@ -346,7 +347,7 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
 
     return ClosedLoopResult(
         success=success, status=status, message=message, settings=settings,
-        time_s=np.arange(xs.shape[0]) * settings.control_period_s,
+        time_s=np.arange(xs.shape[0]) * settings.controller.control_period_s,
         winding_c=node("winding"), casing_c=node("casing"), drive_c=drive,
         q_rad=xs[:, model.index(first, "q_rad")], v_rad_s=xs[:, model.index(first, "v_rad_s")],
         estimated_winding_c=logged("est"), winding_std_c=logged("std"), resistance_scale=np.array(r["scale"]),

@@ -7,9 +7,9 @@ task's end. When a re-solve is infeasible, the remaining hold is shortened (the 
 priority over holding) and the problem re-solved; if still infeasible, the controller falls back
 to the previous plan's shifted control with its feedback gains, u = u_j + K_j (x - x_j).
 
-Faults: a solve that fails, or takes longer than ``settings.max_solve_s`` (its answer would come
+Faults: a solve that fails, or takes longer than ``settings.controller.max_solve_s`` (its answer would come
 too late; it is discarded), also leads to that fallback, and the period says so in its events. With
-``settings.derate`` the fallback current is capped at the no-heating current (the current whose
+``settings.controller.derate`` the fallback current is capped at the no-heating current (the current whose
 Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
 planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
 the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
@@ -29,6 +29,7 @@ from .._config import require
 from ..model.actuated import ActuatedArm
 from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
+from ..tasks._common import default_limit_c
 from .settings import MPCSettings
 
 log = logging.getLogger(__name__)
@@ -52,11 +53,12 @@ class ControlStep:
 
 def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     """The lift OCP of the controller: ``horizon_knots`` knots at the control period, limit backed off."""
-    base = LiftSettings(payload_kg=settings.payload_kg, limit_c=settings.planning_limit_c,
-                        dt_s=settings.control_period_s, integrator=settings.integrator,
-                        parameter_file=settings.parameter_file)
-    room = settings.horizon_knots * base.dt_s - base.lift_s - base.lower_s - base.settle_s
-    require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.horizon_knots,
+    settings = settings.with_default_limit(default_limit_c(model.params[model.joints[0]]))
+    base = LiftSettings(payload_kg=settings.scenario.payload_kg, limit_c=settings.planning_limit_c,
+                        dt_s=settings.controller.control_period_s, integrator=settings.controller.integrator,
+                        parameter_file=settings.scenario.parameter_file)
+    room = settings.controller.horizon_knots * base.dt_s - base.lift_s - base.lower_s - base.settle_s
+    require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
     return dataclasses.replace(lp, problem=_limit_on_next_state(lp.problem))
@@ -90,21 +92,22 @@ def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
 
 def mpc_solver(lp: LiftProblem, settings: MPCSettings):
     """The receding-horizon DDP of :func:`mpc_ddp_settings` on ``lp``."""
-    return make_solver(lp, "ddp", mpc_ddp_settings(settings.max_iterations))
+    return make_solver(lp, "ddp", mpc_ddp_settings(settings.controller.max_iterations))
 
 
 class RecedingHorizonController:
-    """Plans the lift task of ``settings`` (hold ``settings.hold_s``) in a window of ``lp.problem.horizon`` knots."""
+    """Plans the lift task of ``settings`` (hold ``settings.scenario.hold_s``) in a window of
+    ``lp.problem.horizon`` knots."""
 
     def __init__(self, lp: LiftProblem, settings: MPCSettings, solver=None):
         self.lp, self.settings = lp, settings
         self.solver = solver if solver is not None else mpc_solver(lp, settings)
         dt = lp.settings.dt_s
         self.lift_knots = lp.settings.knots()["lift"]
-        self.hold_knots = int(round(settings.hold_s / dt))
+        self.hold_knots = int(round(settings.scenario.hold_s / dt))
         fits = self.hold_knots <= lp.hold_knots[1] - lp.hold_knots[0]
-        self.task = lp if fits else build_lift_problem(dataclasses.replace(lp.settings, hold_s=settings.hold_s),
-                                                       lp.model)
+        task_settings = dataclasses.replace(lp.settings, hold_s=settings.scenario.hold_s)
+        self.task = lp if fits else build_lift_problem(task_settings, lp.model)
         knots = lp.settings.knots()
         self.task_knots = knots["lift"] + self.hold_knots + knots["lower"] + knots["settle"]
         self.k = 0
@@ -141,11 +144,12 @@ class RecedingHorizonController:
 
     def _acceptable(self, result: SolverResult, deadline: bool = True) -> bool:
         """Finite, feasible and (re-solves only: the cold plan is made before moving) in time."""
-        return bool(np.isfinite(result.cost) and result.max_constraint_violation <= self.settings.feasibility_tolerance
+        tolerance = self.settings.controller.feasibility_tolerance
+        return bool(np.isfinite(result.cost) and result.max_constraint_violation <= tolerance
                     and not (deadline and self._late(result.solve_s)))
 
     def _late(self, solve_s: float) -> bool:
-        return self.settings.max_solve_s is not None and solve_s > self.settings.max_solve_s
+        return self.settings.controller.max_solve_s is not None and solve_s > self.settings.controller.max_solve_s
 
     def start(self, x_est: np.ndarray) -> ControlStep:
         """Cold plan at knot 0. When the requested hold is infeasible from the estimated state, it is cut
@@ -190,7 +194,7 @@ class RecedingHorizonController:
         result = self.solver.solve(x_est, self.window(), warm)
         results, status = [result], "solved"
         while (not self._acceptable(result) and not self._late(sum(r.solve_s for r in results))
-               and len(results) <= self.settings.max_retries and self._shorten()):
+               and len(results) <= self.settings.controller.max_retries and self._shorten()):
             result = self.solver.solve(x_est, self.window(), warm)
             results.append(result)
             status = "hold_shortened"
@@ -219,17 +223,17 @@ class RecedingHorizonController:
 
     def warm_start(self, shift: int = 1) -> WarmStart:
         """The plan shifted by ``shift`` knots with its multipliers; the AL penalty is capped at
-        ``settings.warm_penalty_max`` (a penalty grown near infeasibility would leave the next problems
+        ``settings.controller.warm_penalty_max`` (a penalty grown near infeasibility would leave the next problems
         ill-conditioned)."""
         warm = WarmStart.from_result(self.plan, shift=min(shift, self.lp.problem.horizon))
         multipliers = dict(warm.multipliers)
         if "penalty" in multipliers:
-            multipliers["penalty"] = min(float(multipliers["penalty"]), self.settings.warm_penalty_max)
+            multipliers["penalty"] = min(float(multipliers["penalty"]), self.settings.controller.warm_penalty_max)
         return WarmStart(warm.xs, warm.us, multipliers)
 
     def _shorten(self) -> bool:
         """Move the start of the lowering earlier by ``hold_step_s`` (never into the past)."""
-        step = max(1, int(round(self.settings.hold_step_s / self.lp.settings.dt_s)))
+        step = max(1, int(round(self.settings.controller.hold_step_s / self.lp.settings.dt_s)))
         shortest = max(0, self.k - self.lift_knots)
         new = max(shortest, self.hold_knots - step)
         if new >= self.hold_knots:
@@ -246,7 +250,7 @@ class RecedingHorizonController:
         if plan.K is not None:
             u = u + plan.K[j] @ (np.asarray(x_est, float) - plan.xs[j])
         hot = np.max(np.asarray(x_est)[self._winding]) >= self.lp.settings.limit_c - 1e-6
-        if not (self.settings.derate and (hot or age >= plan.us.shape[0])):
+        if not (self.settings.controller.derate and (hot or age >= plan.us.shape[0])):
             return u, False
         cap = self.no_heating_current_a(x_est)
         capped = np.clip(u, -cap, cap)

@@ -86,18 +86,18 @@ class ExtendedKalmanFilter:
 
     def __init__(self, model: ActuatedArm, settings: MPCSettings, observer: ObserverSettings = ObserverSettings()):
         self.model, self.settings, self.observer = model, settings, observer
-        self.augmented = settings.estimate_resistance_scale
-        dt = settings.control_period_s
+        self.augmented = settings.estimator.estimate_resistance_scale
+        dt = settings.controller.control_period_s
         ode = scaled_ode(model) if self.augmented else model.ode
-        step = make_step(ode, dt, settings.integrator)
+        step = make_step(ode, dt, settings.controller.integrator)
         self._step_jacobians = step_jacobians(step)
         n, nx = model.nu, model.nx
         self.nz = nx + int(self.augmented)
         self._casing, self._winding = model.sensor_indices(), model.node_indices("winding")
         self._measured = np.concatenate([np.arange(2 * n), self._casing])
-        temp_var = settings.casing_noise_c ** 2 + settings.casing_quantum_c ** 2 / 12
-        self._r = np.concatenate([np.full(n, settings.position_noise_rad ** 2),
-                                  np.full(n, settings.velocity_noise_rad_s ** 2), np.full(n, temp_var)])
+        temp_var = settings.sensors.casing_noise_c ** 2 + settings.sensors.casing_quantum_c ** 2 / 12
+        self._r = np.concatenate([np.full(n, settings.sensors.position_noise_rad ** 2),
+                                  np.full(n, settings.sensors.velocity_noise_rad_s ** 2), np.full(n, temp_var)])
         self._r = np.maximum(self._r, 1e-12)
         q = np.concatenate([np.full(n, observer.position_rad ** 2), np.full(n, observer.velocity_rad_s ** 2),
                             np.full(nx - 2 * n, observer.temperature_c ** 2)])
@@ -139,7 +139,7 @@ class ExtendedKalmanFilter:
             raise ValueError("the observer needs a finite casing sample to start")
         amb = self.ambient_c = float(model.ambient_c if m.ambient_c is None else m.ambient_c)
         p0 = np.concatenate([self._r[:2 * model.nu], np.full(model.nx - 2 * model.nu, o.initial_temperature_c ** 2)])
-        if self.settings.observer_start == "settled":   # no current for minutes: winding = casing
+        if self.settings.estimator.observer_start == "settled":   # no current for minutes: winding = casing
             temps, scale = np.full(model.nx - 2 * model.nu, float(np.mean(m.casing_c))), 1.0
             drive = [i - 2 * model.nu for i in _indices(model, "drive")]
             p0[2 * model.nu + np.array(drive, dtype=int)] = o.initial_drive_c ** 2
@@ -170,7 +170,7 @@ class ExtendedKalmanFilter:
 
     def update(self, m: Measurement, casing_c: np.ndarray | None = None, use_casing: bool = True) -> np.ndarray | None:
         """Correct with q, v, the casing sample (``casing_c``, default ``m.casing_c``; skipped when absent,
-        non-finite or ``use_casing`` is False) and, with ``settings.observe_voltage``, the voltage
+        non-finite or ``use_casing`` is False) and, with ``settings.estimator.observe_voltage``, the voltage
         (Joseph form). Returns the normalised casing innovations (None without a casing update)."""
         n = self.model.nu
         casing = m.casing_c if casing_c is None else casing_c
@@ -181,7 +181,7 @@ class ExtendedKalmanFilter:
         h[np.arange(y.size), rows] = 1.0
         r = self._r[:y.size]
         prediction = self.z[rows]
-        if self.settings.observe_voltage and m.voltage_v is not None and np.all(np.isfinite(m.voltage_v)):
+        if self.settings.estimator.observe_voltage and m.voltage_v is not None and np.all(np.isfinite(m.voltage_v)):
             hv, offset, rv = self._voltage_rows(m)
             y, h = np.concatenate([y, m.voltage_v]), np.vstack([h, hv])
             r, prediction = np.concatenate([r, rv]), np.concatenate([prediction, hv @ self.z + offset])
@@ -204,7 +204,7 @@ class ExtendedKalmanFilter:
         s = self.settings
         volts, h, ohm = (np.array(a, dtype=float) for a in self._voltage(self.z, np.asarray(m.current_a, float)))
         volts, ohm = volts.ravel(), ohm.ravel()
-        return h, volts - h @ self.z, s.voltage_noise_v ** 2 + (ohm * s.current_noise_a) ** 2
+        return h, volts - h @ self.z, s.sensors.voltage_noise_v ** 2 + (ohm * s.sensors.current_noise_a) ** 2
 
     def filter_step(self, m: Measurement) -> list[str]:
         """Predict over the period that just ended with ``m.current_a``, check the casing sample, update
@@ -287,9 +287,9 @@ class CasingMonitor:
         self.reason: str | None = None
         self._previous: np.ndarray | None = None
         self._run = 1
-        self._innovations: collections.deque = collections.deque(maxlen=settings.innovation_window)
-        self.stuck_samples = stuck_run_length(settings.casing_noise_c, settings.casing_quantum_c,
-                                              settings.stuck_false_alarm)
+        self._innovations: collections.deque = collections.deque(maxlen=settings.estimator.innovation_window)
+        self.stuck_samples = stuck_run_length(settings.sensors.casing_noise_c, settings.sensors.casing_quantum_c,
+                                              settings.estimator.stuck_false_alarm)
 
     def classify(self, sample: np.ndarray | None) -> list[str]:
         if sample is None:
@@ -304,16 +304,16 @@ class CasingMonitor:
             if self.trusted and self._run >= self.stuck_samples:
                 self._distrust("casing_stuck", f"{self._run} equal samples in a row")
                 events.append("casing_stuck")
-            if self.settings.reject_repeated_casing or not self.trusted:
+            if self.settings.estimator.reject_repeated_casing or not self.trusted:
                 events.append("casing_repeat")
         return events
 
     def innovation(self, normalised: np.ndarray) -> list[str]:
         self._innovations.append(float(np.mean(normalised)))
-        w = self.settings.innovation_window
+        w = self.settings.estimator.innovation_window
         if self.trusted and len(self._innovations) == w:
             statistic = abs(sum(self._innovations)) / math.sqrt(w)
-            if statistic > self.settings.innovation_threshold:
+            if statistic > self.settings.estimator.innovation_threshold:
                 self._distrust("casing_inconsistent", f"normalised innovation sum {statistic:.1f} over {w} samples")
                 return ["casing_inconsistent"]
         return []

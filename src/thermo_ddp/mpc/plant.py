@@ -66,16 +66,16 @@ class Plant:
 
     def __init__(self, model: ActuatedArm, x0: np.ndarray, settings: MPCSettings, rng: np.random.Generator):
         self.model, self.settings, self.rng = model, settings, rng
-        self.fault_rng = np.random.default_rng((settings.seed, 1))
+        self.fault_rng = np.random.default_rng((settings.scenario.seed, 1))
         self.x = np.array(x0, dtype=float)
         self.time_s = 0.0
         self.current_a = np.zeros(model.nu)
-        dt = settings.control_period_s / settings.plant_substeps
-        self._period = model.step(dt, "rk4").mapaccum(settings.plant_substeps)
+        dt = settings.controller.control_period_s / settings.plant.plant_substeps
+        self._period = model.step(dt, "rk4").mapaccum(settings.plant.plant_substeps)
         self._peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
         self._casing = model.sensor_indices()
         self._winding = model.node_indices("winding")
-        self._delayed = collections.deque(maxlen=settings.casing_delay_steps + 1)
+        self._delayed = collections.deque(maxlen=settings.sensors.casing_delay_steps + 1)
         self._delivered: np.ndarray | None = None
         self._stuck: np.ndarray | None = None
         self.peak_winding_c = float(np.max(self.x[self._winding]))
@@ -88,8 +88,8 @@ class Plant:
     def ambient_c(self) -> float:
         """The room now (it warms by ``ambient_step_c`` at ``ambient_step_time_s``)."""
         s = self.settings
-        stepped = s.ambient_step_c != 0 and self.time_s >= s.ambient_step_time_s - 1e-9
-        return self.model.ambient_c + (s.ambient_step_c if stepped else 0.0)
+        stepped = s.plant.ambient_step_c != 0 and self.time_s >= s.plant.ambient_step_time_s - 1e-9
+        return self.model.ambient_c + (s.plant.ambient_step_c if stepped else 0.0)
 
     def apply(self, current_a) -> None:
         """Hold ``current_a`` (clipped to +-peak) for one control period."""
@@ -97,7 +97,7 @@ class Plant:
         xs = np.array(self._period(self.x, self.current_a, self.ambient_c))
         self.peak_winding_c = max(self.peak_winding_c, float(xs[self._winding, :].max()))
         self.x = xs[:, -1].copy()
-        self.time_s += self.settings.control_period_s
+        self.time_s += self.settings.controller.control_period_s
 
     def voltage_v(self) -> np.ndarray:
         out = self.model.outputs(self.x, self.current_a, self.ambient_c)
@@ -105,21 +105,21 @@ class Plant:
 
     def measure(self) -> Measurement:
         s, n = self.settings, self.model.nu
-        casing = self.x[self._casing] + s.casing_noise_c * self.rng.standard_normal(n)
-        if s.casing_quantum_c > 0:
-            casing = np.round(casing / s.casing_quantum_c) * s.casing_quantum_c
+        casing = self.x[self._casing] + s.sensors.casing_noise_c * self.rng.standard_normal(n)
+        if s.sensors.casing_quantum_c > 0:
+            casing = np.round(casing / s.sensors.casing_quantum_c) * s.sensors.casing_quantum_c
         self._delayed.append(casing)
         sample = self._delayed[0] if len(self._delayed) == self._delayed.maxlen else None
-        if sample is not None and self.rng.random() < s.casing_dropout_probability:
+        if sample is not None and self.rng.random() < s.sensors.casing_dropout_probability:
             sample = None
         sample = self._faulty(sample)
         f = self.fault_rng
-        voltage = self.voltage_v() + s.voltage_noise_v * f.standard_normal(n)
-        ambient = self.ambient_c + s.ambient_noise_c * f.standard_normal()
+        voltage = self.voltage_v() + s.sensors.voltage_noise_v * f.standard_normal(n)
+        ambient = self.ambient_c + s.sensors.ambient_noise_c * f.standard_normal()
         return Measurement(self.time_s,
-                           self.x[:n] + s.position_noise_rad * self.rng.standard_normal(n),
-                           self.x[n:2 * n] + s.velocity_noise_rad_s * self.rng.standard_normal(n),
-                           self.current_a + s.current_noise_a * self.rng.standard_normal(n), sample,
+                           self.x[:n] + s.sensors.position_noise_rad * self.rng.standard_normal(n),
+                           self.x[n:2 * n] + s.sensors.velocity_noise_rad_s * self.rng.standard_normal(n),
+                           self.current_a + s.sensors.current_noise_a * self.rng.standard_normal(n), sample,
                            voltage, float(ambient))
 
     def _faulty(self, sample: np.ndarray | None) -> np.ndarray | None:
@@ -127,13 +127,14 @@ class Plant:
         s, f = self.settings, self.fault_rng
         if sample is None:
             return None
-        if s.casing_stuck_time_s is not None and self.time_s >= s.casing_stuck_time_s - 1e-9:
+        if s.sensors.casing_stuck_time_s is not None and self.time_s >= s.sensors.casing_stuck_time_s - 1e-9:
             if self._stuck is None:
                 self._stuck = sample.copy() if self._delivered is None else self._delivered.copy()
             return self._stuck.copy()
-        if s.casing_nan_probability and f.random() < s.casing_nan_probability:
+        if s.sensors.casing_nan_probability and f.random() < s.sensors.casing_nan_probability:
             return np.full_like(sample, np.nan)
-        if s.casing_stale_probability and self._delivered is not None and f.random() < s.casing_stale_probability:
+        stale = s.sensors.casing_stale_probability
+        if stale and self._delivered is not None and f.random() < stale:
             return self._delivered.copy()
         self._delivered = sample.copy()
         return sample.copy()

@@ -33,7 +33,7 @@ def plot_closed_loop(result, path) -> None:
     for a in ax:
         a.legend(loc="best", fontsize=7)
         a.grid(alpha=0.3)
-    ax[0].set_title(f"closed loop {s.payload_kg:g} kg, hold {s.hold_s:g} s: {result.status}, "
+    ax[0].set_title(f"closed loop {s.scenario.payload_kg:g} kg, hold {s.scenario.hold_s:g} s: {result.status}, "
                     f"margin {result.margin_c:.2f} K")
     fig.tight_layout()
     fig.savefig(path, dpi=100)

@@ -182,17 +182,18 @@ def mpc_settings(settings: LoopSettings, limit_c: float, model_file: Path, model
     the observer measures the motor voltage when ``settings.voltage``, except for the original model."""
     lift = LiftSettings()
     task_s = lift.lift_s + settings.hold_s + lift.lower_s + lift.settle_s
-    knots = settings.horizon_knots or int(math.ceil(task_s / MPCSettings().control_period_s - 1e-9))
-    return MPCSettings(payload_kg=settings.payload_kg, limit_c=limit_c, hold_s=settings.hold_s,
-                       backoff_c=settings.backoff_c, horizon_knots=knots, seed=settings.seed,
-                       parameter_file=str(model_file), observe_voltage=settings.voltage and model != "original")
+    knots = settings.horizon_knots or int(math.ceil(task_s / MPCSettings().controller.control_period_s - 1e-9))
+    return MPCSettings.from_options(payload_kg=settings.payload_kg, limit_c=limit_c, hold_s=settings.hold_s,
+                                    backoff_c=settings.backoff_c, horizon_knots=knots, seed=settings.seed,
+                                    parameter_file=str(model_file),
+                                    observe_voltage=settings.voltage and model != "original")
 
 
 def execute(model_file: Path, plant_model: ActuatedArm, settings: MPCSettings,
             progress: bool = False) -> ClosedLoopResult:
     """Receding-horizon lift with the planner's model from ``model_file`` (``settings.parameter_file``) on
     ``plant_model``, the robot's true physics."""
-    settings = dataclasses.replace(settings, parameter_file=str(model_file))
+    settings = settings.replace(parameter_file=str(model_file))
     return run_closed_loop(settings, plant_model=plant_model, progress=progress)
 
 

@@ -53,7 +53,7 @@ def draw(run: int, seed: int = 0) -> dict[str, Any]:
 @functools.cache
 def controller_solver():
     """The sweep controller's solver, built once per process (its compiled passes come from the disk cache)."""
-    settings = MPCSettings(**CONTROLLER)
+    settings = MPCSettings.from_options(**CONTROLLER)
     model, _ = build_models(settings)
     return mpc_solver(planning_problem(settings, model), settings)
 
@@ -62,8 +62,8 @@ def one_run(run: int, seed: int) -> dict[str, Any]:
     """The randomised run and its nominal twin: a pure function of (run, seed); figures only (picklable)."""
     solver = controller_solver()
     d = draw(run, seed)
-    settings = MPCSettings(**CONTROLLER, **d)
-    nominal = MPCSettings(**CONTROLLER, plant_initial_c=d["plant_initial_c"], seed=int(run))
+    settings = MPCSettings.from_options(**CONTROLLER, **d)
+    nominal = MPCSettings.from_options(**CONTROLLER, plant_initial_c=d["plant_initial_c"], seed=int(run))
     t0 = time.perf_counter()
     r = run_closed_loop(settings, solver=solver, observer=OBSERVER, progress=False)
     n = run_closed_loop(nominal, solver=solver, observer=OBSERVER, progress=False)
