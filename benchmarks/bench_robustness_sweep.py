@@ -1,19 +1,24 @@
-"""Robustness sweep of the closed-loop lift: randomised runs (plant thermal values +-25 %, friction
+"""Robustness sweep of the closed-loop lift on Dask: randomised runs (plant thermal values +-25 %, friction
 +-30 %, casing noise and quantisation, voltage and current noise, initial temperature 30-60 °C), each
-paired with a nominal run; 2 worker processes. Figures: limit violations (target 0), cut-off trips at
-84 °C (measured casing), the minimum margin under the limit and the median hold as a fraction of the
-nominal hold. See thermo_ddp.studies.sweep.
+paired with a nominal run, on a LocalCluster of 2 worker processes. Figures: runs over the winding limit
+(target 0), cut-off trips at 84 °C (measured casing), the minimum margin under the limit, the median hold
+as a fraction of the nominal hold, runs needing the fallback controller. Wall time against serial: the
+first ``--serial-runs`` seeds are run again in this process one after the other (the same runs, checked
+equal), and the serial time of the whole sweep is extrapolated from them. See thermo_ddp.studies.sweep.
 
-Usage: python benchmarks/bench_robustness_sweep.py [--runs 200] [--workers 2] [--seed 0]
+Usage: python benchmarks/bench_robustness_sweep.py [--runs 200] [--workers 2] [--seed 0] [--serial-runs 20]
 """
 from __future__ import annotations
 
 import argparse
 import logging
 
-from _common import write
+from _common import RESULTS, write
 
+from thermo_ddp.studies.engine import EngineSettings
 from thermo_ddp.studies.sweep import robustness_sweep
+
+COMPARED = ("max_winding_c", "achieved_hold_s", "margin_c", "fallbacks")
 
 
 def main():
@@ -21,13 +26,23 @@ def main():
     ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--serial-runs", type=int, default=20)
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
-    out = robustness_sweep(args.runs, args.workers, args.seed)
+    sweep = robustness_sweep(args.runs, args.seed, engine=EngineSettings(workers=args.workers))
+    serial = robustness_sweep(args.serial_runs, args.seed, engine=None)
+    same = all(a[k] == b[k] for a, b in zip(sweep.runs, serial.runs) for k in COMPARED)
+    serial_estimate_s = serial.wall_s * args.runs / args.serial_runs
+    out = sweep.to_dict()
+    out["serial"] = {"runs": args.serial_runs, "wall_s": serial.wall_s, "equal_to_dask_runs": same,
+                     "extrapolated_wall_s": serial_estimate_s,
+                     "speed_up": serial_estimate_s / sweep.wall_s}
     write("robustness_sweep", out)
-    print(f"{out['runs']} runs in {out['wall_s']:.0f} s on {out['workers']} workers: {out['violations']} violations, "
-          f"{out['cutoff_trips']} cut-off trips, min margin {out['min_margin_c']:.2f} K, "
-          f"median hold fraction {out['median_hold_fraction']:.2f} (min {out['min_hold_fraction']:.2f})")
+    sweep.plot(RESULTS / "robustness_sweep.png")
+    print(sweep.report())
+    print(f"serial: {args.serial_runs} runs in {serial.wall_s:.0f} s (equal to the Dask runs: {same}); "
+          f"{args.runs} runs extrapolated {serial_estimate_s:.0f} s, Dask {sweep.wall_s:.0f} s "
+          f"({out['serial']['speed_up']:.2f}x)")
 
 
 if __name__ == "__main__":

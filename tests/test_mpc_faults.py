@@ -140,13 +140,8 @@ def test_room_warms_by_ten_kelvin_mid_run():
     assert np.allclose(after, 36.0, atol=0.2) and np.allclose(r.planner_params[:20, :, 3], 26.0)
 
 
-def test_short_robustness_sweep_has_no_violation():
-    out = robustness_sweep(runs=6, workers=2, seed=1, progress=False)
-    assert out["violations"] == 0 and out["cutoff_trips"] == 0, out["results"]
-    assert out["min_margin_c"] >= 0 and len(out["results"]) == 6
-    # a run is a pure function of (run, seed): the spawned workers' numbers equal a serial re-run's
-    serial = robustness_sweep(runs=2, workers=1, seed=1, progress=False)["results"]
-    for par, ser in zip(out["results"][:2], serial):
-        assert par["draw"] == ser["draw"]
-        for key in ("peak_winding_c", "margin_c", "hold_s", "nominal_hold_s", "fallbacks"):
-            assert par[key] == ser[key], (key, par[key], ser[key])
+def test_robustness_sweep_has_no_violation():
+    out = robustness_sweep(runs=4, seed=1, engine=None, progress=False)
+    s = out.summary()
+    assert out.success and s["violations"] == 0 and s["cutoff_trips"] == 0, out.runs
+    assert s["min_margin_c"] >= 0 and len(out.runs) == 4

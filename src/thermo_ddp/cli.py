@@ -49,6 +49,24 @@ def _loop(args) -> int:
     return 0
 
 
+def _sweep(args) -> int:
+    from .outputs import Outputs
+    from .studies.engine import EngineSettings
+    from .studies.sweep import MAX_RUNS, robustness_sweep
+    if not 1 <= args.runs <= MAX_RUNS:
+        raise InputError("--runs", "--runs", args.runs, f"must be in [1, {MAX_RUNS}]")
+    if args.seed < 0:
+        raise InputError("--seed", "--seed", args.seed, "must be >= 0")
+    engine = EngineSettings(scheduler=args.scheduler, workers=args.workers)
+    outputs = Outputs.check({"--json": args.json, "--plot": args.plot})
+    result = robustness_sweep(args.runs, args.seed, args.short, engine)
+    print(result.report())
+    outputs.json("--json", result.to_dict())
+    outputs.figure("--plot", result.plot)
+    outputs.commit()
+    return 0 if result.success else 1
+
+
 def _cache(args) -> int:
     from . import codegen
     if args.clear:
@@ -146,6 +164,22 @@ def _loop_parser() -> _Parser:
     return cmd
 
 
+def _sweep_parser() -> _Parser:
+    cmd = _Parser(prog="thermo-ddp sweep", description="randomised closed-loop lifts (plant thermal values "
+                  "+-25 %, friction +-30 %, sensor noise, start 30-60 °C) on Dask: a LocalCluster by default")
+    cmd.add_argument("--runs", type=int, default=200, help="number of runs (default %(default)s)")
+    cmd.add_argument("--short", action="store_true", help="flag: a 5 s hold instead of 15 s")
+    cmd.add_argument("--seed", type=int, default=0, help="seed of the sweep; run i's seed is word i of its "
+                                                         "stream (default %(default)s)")
+    cmd.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                     help="Dask scheduler, e.g. tcp://127.0.0.1:8786 (default: a LocalCluster on this machine)")
+    cmd.add_argument("--workers", type=int, default=2,
+                     help="worker processes of the LocalCluster, count (default %(default)s; ignored with --scheduler)")
+    cmd.add_argument("--json", metavar="OUT", help="write the sweep JSON here (default: none)")
+    cmd.add_argument("--plot", metavar="OUT.png", help="write the margin and hold histograms here (default: none)")
+    return cmd
+
+
 def _cache_parser() -> _Parser:
     from .codegen import DEFAULT_CACHE_MAX_MB
     cmd = _Parser(prog="thermo-ddp cache", description="the compiled-library cache: $THERMO_DDP_CACHE (default "
@@ -166,6 +200,7 @@ COMMANDS = {
     "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "
                                                        "physics, refit and validate", True), _diagnose),
     "cache": (_cache_parser, _cache),
+    "sweep": (_sweep_parser, _sweep),
 }
 
 

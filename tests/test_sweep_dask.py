@@ -1,0 +1,92 @@
+"""The sweep on Dask: a LocalCluster of two worker processes gives the serial numbers seed for seed, a
+worker killed mid-sweep loses no run, a failing task is recorded (not dropped), and the CLI writes the
+Sweep JSON of the contract."""
+import json
+import os
+import signal
+import threading
+
+import pytest
+
+from thermo_ddp.cli import main
+from thermo_ddp.studies.engine import EngineSettings, dask_client, map_tasks
+from thermo_ddp.studies.sweep import draw, robustness_sweep, run_seeds, sweep_run
+
+COMPARED = ("max_winding_c", "achieved_hold_s", "nominal_hold_s", "margin_c", "violations", "cutoff_trips",
+            "fallbacks", "draw")
+
+
+def assert_same_runs(a, b):
+    assert [r["seed"] for r in a] == [r["seed"] for r in b]
+    for x, y in zip(a, b):
+        for key in COMPARED:
+            assert x[key] == y[key], (x["seed"], key, x[key], y[key])
+
+
+@pytest.fixture(scope="module")
+def serial():
+    return robustness_sweep(4, seed=3, short=True, engine=None, progress=False)
+
+
+def test_seeds_of_a_longer_sweep_extend_a_shorter_one():
+    assert run_seeds(3, 200)[:4] == run_seeds(3, 4)
+    assert len(set(run_seeds(3, 200))) == 200 and run_seeds(3, 4) != run_seeds(4, 4)
+
+
+def test_local_cluster_equals_serial_seed_for_seed(serial):
+    assert serial.success and serial.summary()["violations"] == 0
+    local = robustness_sweep(4, seed=3, short=True, engine=EngineSettings(workers=2), progress=False)
+    assert local.engine["kind"] == "dask" and local.engine["workers"] == 2
+    assert local.success
+    assert_same_runs(local.runs, serial.runs)
+
+
+def test_killed_worker_loses_no_run(serial):
+    seeds = run_seeds(3, 4)
+    with dask_client(EngineSettings(workers=2)) as client:
+        pids = list(client.run(os.getpid).values())
+        killed = threading.Event()
+
+        def kill():  # once a worker is busy with its first run
+            os.kill(pids[0], signal.SIGKILL)
+            killed.set()
+
+        timer = threading.Timer(4.0, kill)
+        timer.start()
+        outcomes = map_tasks(client, sweep_run, seeds, progress=False, short=True)
+        timer.cancel()
+    assert killed.is_set(), "the sweep ended before the worker was killed: the test proved nothing"
+    assert all(o.success for o in outcomes), [o.message for o in outcomes]
+    assert_same_runs([o.value for o in outcomes], serial.runs)
+
+
+def test_failing_task_is_recorded_not_dropped():
+    with dask_client(EngineSettings(workers=1)) as client:
+        outcomes = map_tasks(client, draw, [1, -1, 2], progress=False)
+    assert [o.item for o in outcomes] == [1, -1, 2]
+    assert [o.success for o in outcomes] == [True, False, True]
+    assert "ValueError" in outcomes[1].message and outcomes[0].value == draw(1)
+
+
+def test_cli_sweep_writes_the_contract_json(tmp_path, capsys):
+    out = tmp_path / "sweep.json"
+    assert main(["sweep", "--runs", "2", "--short", "--seed", "3", "--workers", "1", "--json", str(out),
+                 "--plot", str(tmp_path / "sweep.png")]) == 0
+    data = json.loads(out.read_text())
+    assert set(data["engine"]) == {"kind", "address", "workers"} and data["engine"]["kind"] == "dask"
+    assert [r["seed"] for r in data["runs"]] == run_seeds(3, 2)
+    for run in data["runs"]:
+        assert {"seed", "success", "max_winding_c", "limit_c", "violations", "cutoff_trips",
+                "achieved_hold_s"} <= set(run)
+    assert {"runs", "violations", "cutoff_trips", "median_hold_ratio"} <= set(data["summary"])
+    assert (tmp_path / "sweep.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, field", [(["--runs", "0"], "--runs"), (["--seed", "-1"], "--seed"),
+                                          (["--scheduler", "nonsense"], "scheduler"),
+                                          (["--scheduler", "tcp://127.0.0.1:9"], "--scheduler")])
+def test_cli_sweep_bad_input_is_one_line_exit_2(argv, field, tmp_path, capsys):
+    assert main(["sweep", "--short", "--json", str(tmp_path / "s.json"), *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and field in err, err
+    assert not (tmp_path / "s.json").exists()
