@@ -90,3 +90,22 @@ def test_cli_sweep_bad_input_is_one_line_exit_2(argv, field, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and field in err, err
     assert not (tmp_path / "s.json").exists()
+
+
+def test_fleet_diagnosis_on_the_cluster_equals_one_by_one(tmp_path):
+    from thermo_ddp.studies.fleet import diagnose_fleet, diagnose_one
+    from thermo_ddp.studies.testbed import PlantParameters, static_3a
+
+    paths = []
+    for name, effects in (("robot_a", "drive"), ("robot_b", "none")):
+        rec = static_3a(params=PlantParameters().with_effects(effects), heating_s=1800.0, cooling_s=1800.0)
+        paths.append(str(tmp_path / f"{name}.csv"))
+        rec.to_csv(paths[-1])
+    fleet = diagnose_fleet(paths, engine=EngineSettings(workers=2), progress=False)
+    assert fleet.engine["workers"] == 2 and fleet.recordings == tuple(paths)
+    for path, d in zip(paths, fleet.diagnoses):
+        alone = diagnose_one(path)
+        assert [t["term"] for t in d["missing_physics"]] == [t["term"] for t in alone["missing_physics"]]
+        assert d["final"]["rmse"] == alone["final"]["rmse"]
+    assert fleet.terms().get("drive_heating") == [paths[0]]   # the drive-heated robot, only
+    assert "robot_a.csv" in fleet.report() and fleet.to_dict()["summary"]["terms"] == fleet.terms()
