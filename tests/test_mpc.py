@@ -157,7 +157,8 @@ def test_warm_started_resolve_equals_a_cold_solve_from_the_same_state():
     assert warm.iterations < cold.iterations
     assert abs(warm.cost - cold.cost) <= 1e-6 * abs(cold.cost)
     winding = model.node_indices("winding")
-    assert warm.xs[:, winding].max() == pytest.approx(settings.planning_limit_c, abs=1e-4)  # limit active
+    # limit active: the plan enters the soft back-off band only by what its penalty allows (mK)
+    assert settings.planning_limit_c <= warm.xs[:, winding].max() <= settings.planning_limit_c + 0.01
     ipopt = IpoptSolver(lp.problem).solve(x, window, initial_guess(dataclasses.replace(lp, x0=x, params=window)))
     assert ipopt.success and abs(ipopt.cost - cold.cost) <= 1e-5 * abs(ipopt.cost)
 

@@ -145,3 +145,24 @@ def test_robustness_sweep_has_no_violation():
     s = out.summary()
     assert out.success and s["violations"] == 0 and s["cutoff_trips"] == 0, out.runs
     assert s["min_margin_c"] >= 0 and len(out.runs) == 4
+
+
+def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back():
+    """A plant that runs hotter than planned (winding-casing resistance +11 %, less capacity, warm start): with
+    the back-off band hard, re-solves near the limit fail and the fallback applies open-loop current while
+    lowering; with the band soft (the default), nearly every period is planned and the true limit holds."""
+    from thermo_ddp.studies.sweep import CONTROLLER, OBSERVER
+
+    draw = dict(plant_thermal_scales=(("winding_capacity_j_per_k", 0.956), ("casing_capacity_j_per_k", 0.857),
+                                      ("winding_casing_k_per_w", 1.114), ("casing_ambient_k_per_w", 1.023)),
+                plant_friction_scale=0.75, casing_noise_c=0.05, current_noise_a=0.03, voltage_noise_v=0.023,
+                plant_initial_c=53.8, seed=6)
+    results = {}
+    for weight in (0.0, 1e4):
+        settings = MPCSettings.from_options(**CONTROLLER, **draw, backoff_weight_per_k2=weight)
+        results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
+    hard, soft = results[0.0], results[1e4]
+    fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
+    assert fallbacks[0.0] >= 10, hard.message            # the scenario does stress the hard band
+    assert fallbacks[1e4] <= fallbacks[0.0] / 10, fallbacks
+    assert soft.success and soft.margin_c > 0 and soft.hold_s[-1] >= hard.hold_s[-1]

@@ -124,3 +124,18 @@ def test_knot_parameters_by_name():
         layout.values(5, q_ref_rad=np.zeros(3), weight=1.0, ambient_c=20.0)
     with pytest.raises(InputError, match="names"):
         KnotParameters((("a", 1), ("a", 2)))
+
+
+def test_constraint_made_soft_or_shifted_by_name():
+    x, u, p = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("p")
+    c = Constraint("limit", ca.Function("limit", [x, u, p], [ca.vertcat(x[0] - p, u - 1)], ["x", "u", "p"], ["g"]))
+    soft = c.penalty(50.0, "limit_soft")
+    looser = c.shifted(0.5)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        xv, uv, pv = rng.normal(size=2), rng.normal(), rng.normal()
+        g = np.array([xv[0] - pv, uv - 1])
+        assert np.allclose(np.array(soft.residual(xv, uv, pv)).ravel(), np.maximum(0, g))
+        assert np.allclose(np.array(looser.function(xv, uv, pv)).ravel(), g - 0.5)
+    assert soft.name == "limit_soft" and soft.size == 2 and np.all(soft.weight == 50.0)
+    assert looser.name == "limit" and c.penalty(1.0).name == "limit_penalty"

@@ -153,6 +153,24 @@ class Constraint:
         out = _output_index(self.function, "g", self.name)
         return self.function.size1_out(out) * self.function.size2_out(out)
 
+    def shifted(self, offset: float, name: str | None = None) -> "Constraint":
+        """The constraint ``g - offset <= 0`` (looser by ``offset`` > 0), same inputs."""
+        inputs, g = _symbolic_call(self.function, "g", self.name)
+        return Constraint(name or self.name, ca.Function(name or self.name, inputs, [g - offset],
+                                                         self.function.name_in(), ["g"]))
+
+    def penalty(self, weight, name: str | None = None) -> Cost:
+        """This constraint made soft: the cost ``0.5 * weight * |max(0, g)|^2``, zero wherever ``g <= 0``."""
+        name = name or f"{self.name}_penalty"
+        inputs, g = _symbolic_call(self.function, "g", self.name)
+        return Cost(name, weight, ca.Function(name, inputs, [ca.fmax(0, g)], self.function.name_in(), ["r"]))
+
+
+def _symbolic_call(fun: ca.Function, out_name: str, where: str):
+    """Symbols for every input of ``fun`` and its output ``out_name`` on them."""
+    inputs = [ca.SX.sym(n, fun.sparsity_in(i)) for i, n in enumerate(fun.name_in())]
+    return inputs, ca.densify(fun.call(inputs)[_output_index(fun, out_name, where)])
+
 
 def _check_term(kind: str, name, field: str, fun, out_name: str) -> int:
     """A cost's or constraint's name and CasADi function; returns the index of its output."""

@@ -61,26 +61,36 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
-    return dataclasses.replace(lp, problem=_limit_on_next_state(lp.problem))
+    problem = _limit_on_next_state(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2)
+    return dataclasses.replace(lp, problem=problem)
 
 
-def _limit_on_next_state(problem: OptimalControlProblem) -> OptimalControlProblem:
-    """The lift OCP with the stage winding limit moved from x_k to x_{k+1} = f(x_k, u_k, p_k).
+def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float) -> OptimalControlProblem:
+    """The lift OCP with the stage winding limit moved from x_k to x_{k+1} = f(x_k, u_k, p_k), and its
+    back-off made soft when ``backoff_weight`` > 0.
 
     The set of constrained states is then x_1..x_N (x_N also by the terminal limit): the same as
     the lift's except the measured present state x_0, which no control can change. Without this,
     an estimate a few mK over the limit (plant mismatch during one period) makes every re-solve
     infeasible at knot 0.
+
+    Soft back-off: the winding is held hard under the task's limit (the planning limit + ``backoff_c``) and
+    the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
+    predicted (the estimate inside the band) then gets the best plan that leaves the band soonest instead
+    of an infeasible re-solve and the fallback's open-loop current.
     """
     x, u, p = (ca.SX.sym(n, problem.dynamics.size1_in(i)) for i, n in enumerate(problem.dynamics.name_in()))
     x_next = problem.dynamics(x, u, p)
-    constraints = []
+    constraints, costs = [], list(problem.costs)
     for c in problem.constraints:
         if c.name == "winding_limit":
-            g = ca.Function("winding_limit_next", [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"])
-            c = Constraint("winding_limit_next", g)
+            c = Constraint("winding_limit_next", ca.Function("winding_limit_next", [x, u, p],
+                                                             [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
+            if backoff_weight > 0:
+                costs.append(c.penalty(backoff_weight, "winding_backoff"))
+                c = c.shifted(backoff_c)
         constraints.append(c)
-    return dataclasses.replace(problem, constraints=tuple(constraints), name="lift_mpc")
+    return dataclasses.replace(problem, costs=tuple(costs), constraints=tuple(constraints), name="lift_mpc")
 
 
 def mpc_ddp_settings(max_iterations: int) -> DDPSettings:

@@ -58,9 +58,11 @@ class ScenarioSettings:
 @checked_settings("MPCSettings controller", control_period_s="(0, inf)", horizon_knots="[2, inf)",
                   max_iterations="[1, inf)", feasibility_tolerance="(0, inf)", warm_penalty_max="(0, inf)",
                   hold_step_s="(0, inf)", max_retries="[0, inf)", uncertainty_sigmas="[0, inf)",
-                  sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)")
+                  sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)")
 class ControllerSettings:
     """Receding-horizon DDP: a solve slower than ``max_solve_s`` is discarded (a real-time deadline); the
+    winding is held hard under the task's limit and the scenario's ``backoff_c`` band beneath it costs
+    ``0.5 * backoff_weight_per_k2 * excess^2`` (0: the band is hard, the planning limit a constraint); the
     planner plans from the estimate with every thermal node raised by ``uncertainty_sigmas`` standard
     deviations of the winding estimate, plus ``sensor_fault_backoff_c`` once the casing sensor is
     distrusted; ``derate`` caps the fallback current at the no-heating current near the limit."""
@@ -78,6 +80,7 @@ class ControllerSettings:
     max_solve_s: float | None = None
     derate: bool = True
     ambient_change_c: float = 1.0        # the planner's ambient follows the room beyond this change
+    backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
