@@ -74,6 +74,7 @@ def main():
     args = ap.parse_args()
     settings = MPCSettings.from_options(hold_s=args.hold_s)
     loop = run_closed_loop(settings)
+    settings = loop.settings  # the limit resolved from the parameter file
     print(loop.report())
     if args.plot:
         loop.plot(args.plot)
