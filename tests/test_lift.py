@@ -140,3 +140,36 @@ def test_limit_outside_the_files_range_is_refused(limit_c, field):
     """The file's [limits] winding_max_c bounds any requested limit; a limit at or below the room is no limit."""
     with pytest.raises(InputError, match=f"limit_c = {limit_c}.*{field}"):
         plan_lift(40.0, limit_c, 5.0)
+
+
+def test_careful_motion_lifts_once_slows_at_the_stop_and_ends_at_rest():
+    """The 84 °C plan cut short by the winding (the longest-hold search): without careful_motion it pumps and
+    lowers onto the stop; with it, up, hold, down, slow near the stop, at rest and inside the range. The
+    careful plan is checked against the same problem solved by IPOPT."""
+    from thermo_ddp.tasks._common import MotionQuality, joint_range_rad
+
+    plain, careful = plan_lift(40.0, 84.0, 20.0), plan_lift(40.0, 84.0, 20.0, careful_motion=True)
+    m = careful.motion
+    assert careful.status == "infeasible_hold" and 5.0 < careful.achieved_hold_s <= plain.achieved_hold_s
+    assert m.reversals == 1 and m.max_speed_near_stop_rad_s <= 0.3 and m.inside_range
+    assert m.final_speed_rad_s <= 0.01 and m.max_acceleration_rad_s2 < plain.motion.max_acceleration_rad_s2
+    assert plain.motion.reversals > 1 or plain.motion.max_speed_near_stop_rad_s > 0.3   # the constraints matter
+    lo, hi = (b[0] for b in joint_range_rad(careful.model))
+    assert MotionQuality.of(careful.time_s, careful.xs[:, 0], careful.xs[:, 1], lo, hi) == m
+    lp = build_lift_problem(LiftSettings(hold_s=careful.achieved_hold_s, limit_c=84.0, careful_motion=True))
+    ddp, ipopt = solve(lp, "ddp"), solve(lp, "ipopt")
+    assert ddp.success and ipopt.success and abs(ddp.cost - ipopt.cost) <= 1e-4 * abs(ipopt.cost)
+
+
+def test_motion_quality_counts_reversals_and_speed_near_the_stops():
+    from thermo_ddp.tasks._common import MotionQuality
+
+    t = np.linspace(0.0, 2.0, 201)
+    q = -0.05 - 0.5 * np.sin(np.pi * t / 2) ** 2       # up and back down: one reversal
+    v = np.gradient(q, t)
+    m = MotionQuality.of(t, q, v, -2.0, 0.0)
+    assert m.reversals == 1 and m.inside_range and m.final_speed_rad_s < 0.02
+    assert m.max_speed_near_stop_rad_s == pytest.approx(np.abs(v[q > -0.1]).max())
+    wobble = MotionQuality.of(t, q, v + 0.3 * np.sin(8 * np.pi * t), -2.0, 0.0)
+    assert wobble.reversals > 1
+    assert not MotionQuality.of(t, q - 2.0, v, -2.0, 0.0).inside_range

@@ -92,6 +92,39 @@ def joint_limit_constraints(model: ActuatedArm, joint: str, x, current_a, limit_
             "joint_velocity": ca.vertcat(v - velocity_limit_rad_s, -v - velocity_limit_rad_s)}
 
 
+def stop_approach(model: ActuatedArm, joint: str, x, stop_speed_rad_s: float, slope_per_s: float):
+    """``g <= 0``: the speed near each joint stop at most ``stop_speed_rad_s + slope_per_s * distance``, so a
+    joint reaches its stops slowly or not at all."""
+    q, v = (x[model.index(joint, name)] for name in ("q_rad", "v_rad_s"))
+    lo, hi = (bound[model.joints.index(joint)] for bound in joint_range_rad(model))
+    near_hi, near_lo = stop_speed_rad_s + slope_per_s * (hi - q), stop_speed_rad_s + slope_per_s * (q - lo)
+    return ca.vertcat(v - near_hi, -v - near_hi, v - near_lo, -v - near_lo)
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionQuality:
+    """What a careful operator checks on a joint's motion: how often it reverses (speeds under
+    ``still_rad_s`` ignored), how fast it moves within ``near_rad`` of a stop, whether it ends at rest and
+    inside its range, and its largest acceleration."""
+
+    reversals: int
+    max_speed_near_stop_rad_s: float
+    final_speed_rad_s: float
+    max_acceleration_rad_s2: float
+    inside_range: bool
+
+    @classmethod
+    def of(cls, time_s, q, v, lower_rad: float, upper_rad: float, near_rad: float = 0.1,
+           still_rad_s: float = 0.02) -> "MotionQuality":
+        q, v, t = (np.asarray(a, float).ravel() for a in (q, v, time_s))
+        signs = np.sign(v[np.abs(v) > still_rad_s])
+        near = (q > upper_rad - near_rad) | (q < lower_rad + near_rad)
+        return cls(int(np.count_nonzero(signs[1:] != signs[:-1])),
+                   float(np.abs(v[near]).max()) if near.any() else 0.0, float(abs(v[-1])),
+                   float(np.abs(np.diff(v) / np.diff(t)).max()),
+                   bool(np.all((q >= lower_rad - 1e-9) & (q <= upper_rad + 1e-9))))
+
+
 # --------------------------------------------------------------------------------------------
 # Problems and verdicts
 # --------------------------------------------------------------------------------------------

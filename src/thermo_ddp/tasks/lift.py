@@ -2,12 +2,16 @@
 
 The lift is a problem built on the general OCP layer (the solvers know nothing of it):
 - state x = [q, v, T_nodes] of the elbow, control u = winding current, per-knot parameter
-  p = [q_ref, tracking weight, hold flag, ambient_c];
+  p = [q_ref, tracking weight, hold flag, ambient_c, direction];
 - costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
   (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
-  ``return_band`` (back down at the end); the current box |i| <= peak.
+  ``return_band`` (back down at the end); the current box |i| <= peak;
+- with ``careful_motion``, the motion a careful operator would ask for: the cost ``acceleration`` (smooth
+  phases: the joint acceleration of the model's ODE) and the constraints ``stop_approach`` (the speed near a
+  joint stop shrinks with the distance to it), ``one_way`` (the lift moves only toward the goal, the hold is
+  still, the lowering only toward the start: up, hold, down and no other reversal) and ``terminal_rest``.
 When the requested hold is infeasible, the longest feasible hold is found by bisection over
 complete optimisations (each a feasibility verdict of the solver), not guessed.
 """
@@ -30,13 +34,15 @@ from ..model.parameters import load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c,
-                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, limit_pair_c,
-                      solver_summary, winding_limits_c)
+                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, joint_range_rad,
+                      limit_pair_c, MotionQuality, solver_summary, stop_approach, winding_limits_c)
 
 log = logging.getLogger(__name__)
 
 # Per-knot parameters of the lift: the angle to track and its weight, 1 on the hold's knots, the room.
-LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1)))
+# ``direction``: the sign the velocity may take (the lift's, the lowering's), 0 while holding.
+LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
+                                  ("direction", 1)))
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # Full DDP: the winding limit's R(T) i^2 curvature lives in the dynamics, which Gauss-Newton
@@ -73,6 +79,12 @@ class LiftSettings:
     tracking_weight: float = 100.0
     energy_weight: float = 1e-2
     velocity_weight: float = 1e-2
+    careful_motion: bool = False        # the acceleration cost and the stop_approach, one_way, terminal_rest
+                                        # constraints (off by default: they cost the solvers 10-25x, issue 15)
+    acceleration_weight: float = 1e-3   # per (rad/s^2)^2 s: smooth phases
+    stop_speed_rad_s: float = 0.1       # the speed toward a joint stop allowed at the stop,
+    stop_slope_per_s: float = 2.0       #   growing by this per rad of distance from it
+    one_way_tolerance_rad_s: float = 0.01   # the speed against a phase's direction allowed (and at the end)
     solver: str = "ddp"
     parameter_file: str | None = None
     find_longest_hold: bool = True
@@ -82,8 +94,12 @@ class LiftSettings:
         check_limit_c(_SRC, self.limit_c)
         for name in ("hold_s", "settle_s"):
             require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
-        for name in ("lift_s", "lower_s", "dt_s", "hold_tolerance_rad", "tracking_weight"):
+        for name in ("acceleration_weight", "stop_slope_per_s"):
+            require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
+        for name in ("lift_s", "lower_s", "dt_s", "hold_tolerance_rad", "tracking_weight", "stop_speed_rad_s",
+                     "one_way_tolerance_rad_s"):
             require(getattr(self, name) > 0, _SRC, name, getattr(self, name), "must be > 0")
+        require(isinstance(self.careful_motion, bool), _SRC, "careful_motion", self.careful_motion, "expected True or False")
         require(self.solver in SOLVERS, _SRC, "solver", self.solver, f"choose one of {', '.join(SOLVERS)}")
         require(self.integrator == "implicit_euler" or rk4_substeps(self.integrator) is not None, _SRC,
                 "integrator", self.integrator, "choose rk4, rk4_<sub-steps> or implicit_euler")
@@ -132,8 +148,11 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     flag = np.zeros(q_ref.size)
     first = k["lift"]
     flag[first:first + hold + 1] = 1.0  # the goal is reached at the end of the lift, held to its end
+    direction = np.zeros(q_ref.size)
+    direction[:first] = np.sign(g - s0)               # lifting: toward the goal only
+    direction[first + hold + 1:] = np.sign(s0 - g)    # lowering and resting: toward the start only
     p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
-                               hold_flag=flag, ambient_c=ambient_c)
+                               hold_flag=flag, ambient_c=ambient_c, direction=direction)
     return p, (first, first + hold)
 
 
@@ -158,6 +177,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     def terminal(name, expr, out="r"):
         return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
 
+    acceleration = model.ode(x, u, par["ambient_c"])[model.index(joint, "v_rad_s")]
     costs = (
         Cost("tracking", 1.0, stage("tracking", ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"]))),
         Cost("joule_energy", settings.energy_weight,
@@ -175,6 +195,18 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         Constraint("terminal_winding_limit", terminal("terminal_winding_limit", limits["winding_limit"], "g")),
         Constraint("return_band", terminal("return_band", ca.vertcat(q - start - tol, start - q - tol), "g")),
     )
+    if settings.careful_motion:
+        still = settings.one_way_tolerance_rad_s
+        acceleration = model.ode(x, u, par["ambient_c"])[model.index(joint, "v_rad_s")]
+        costs += (Cost("acceleration", settings.acceleration_weight,
+                       stage("acceleration", ca.sqrt(settings.dt_s) * acceleration)),)
+        constraints += (
+            Constraint("stop_approach", stage("stop_approach", stop_approach(
+                model, joint, x, settings.stop_speed_rad_s, settings.stop_slope_per_s), "g")),
+            Constraint("one_way", stage("one_way", ca.vertcat(-par["direction"] * v - still, par["hold_flag"] * v - still,
+                                                              -par["hold_flag"] * v - still), "g")))
+        terminal_constraints += (Constraint("terminal_rest", terminal("terminal_rest", ca.vertcat(v - still, -v - still),
+                                                                      "g")),)
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
 
 
@@ -296,12 +328,18 @@ class LiftPlan(PlanSeries):
     binding_constraints: tuple[str, ...]
     time_to_limit_s: float
 
+    @property
+    def motion(self) -> MotionQuality:
+        """Reversals, speed near the stops, rest at the end, acceleration (see :class:`MotionQuality`)."""
+        lo, hi = (b[0] for b in joint_range_rad(self.model))
+        return MotionQuality.of(self.time_s, self.xs[:, 0], self.xs[:, 1], lo, hi)
+
     def to_dict(self) -> dict:
         s = self.settings
         return self.contract_dict(s.payload_kg, s.limit_c, s.hold_s, self.achieved_hold_s, s.integrator, s.dt_s)
 
     def report(self) -> str:
-        w, c = self.series("winding_c").max(), self.sensor_c().max()
+        w, c, m = self.series("winding_c").max(), self.sensor_c().max(), self.motion
         return "\n".join([
             f"lift {self.settings.payload_kg:g} kg, winding limit {self.settings.limit_c:g} °C: "
             f"{'FEASIBLE' if self.feasible else 'INFEASIBLE'} ({self.status})",
@@ -310,6 +348,8 @@ class LiftPlan(PlanSeries):
             f"time to limit at the goal {format_s(self.time_to_limit_s)}",
             f"  peak winding {w:.1f} °C, peak casing {c:.1f} °C, peak |current| {np.abs(self.us).max():.2f} A",
             f"  binding: {', '.join(self.binding_constraints) or 'none'}",
+            f"  motion: {m.reversals} reversal(s), {m.max_speed_near_stop_rad_s:.2f} rad/s at most within 0.1 rad of "
+            f"a stop, {m.final_speed_rad_s:.3f} rad/s at the end, {m.max_acceleration_rad_s2:.1f} rad/s² at most",
             f"  solver {self.solver['name']}: {self.solver['iterations']} iterations, "
             f"{1e3 * self.solver['solve_s']:.1f} ms (all solves {1e3 * self.solver['total_solve_s']:.1f} ms)"])
 
