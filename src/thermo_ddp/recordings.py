@@ -336,52 +336,41 @@ def _long_row(path: Path, width: int) -> tuple[int | None, int]:
     return None, width
 
 
-def _text(series) -> "pd.Series":
-    """Cells as stripped text, quotes removed (logs quote time stamps, sometimes several times)."""
-    return series.astype(str).str.strip().str.strip('"').str.strip()
-
-
-def _is_number_column(series) -> bool:
-    return pd.api.types.is_numeric_dtype(series.dtype) and not pd.api.types.is_bool_dtype(series.dtype)
-
-
-def _empty_cells(series) -> np.ndarray:
-    if _is_number_column(series):
-        return np.zeros(len(series), dtype=bool)
-    return (_text(series) == "").to_numpy()
-
-
-def _numbers(source: str, column: str, series, rows: np.ndarray) -> np.ndarray:
-    """A column as floats; InputError naming the first cell that is not a number."""
-    if _is_number_column(series):
+def _cells(series) -> np.ndarray:
+    """A column as floats (a numeric column) or as stripped text without quotes (logs quote time
+    stamps, sometimes several times); numpy's vectorised string functions."""
+    if pd.api.types.is_numeric_dtype(series.dtype) and not pd.api.types.is_bool_dtype(series.dtype):
         return series.to_numpy(dtype=float)
-    text = _text(series)
-    bad = np.flatnonzero(_not_numbers(text))
+    return np.char.strip(np.char.strip(np.char.strip(series.to_numpy(dtype=str)), '"'))
+
+
+def _is_text(cells: np.ndarray) -> bool:
+    return cells.dtype.kind == "U"
+
+
+def _numbers(source: str, column: str, cells: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A column as floats; InputError naming the first cell that is not a number."""
+    if not _is_text(cells):
+        return cells
+    values = pd.to_numeric(cells, errors="coerce").astype(float)
+    bad = np.flatnonzero(np.isnan(values) & (np.char.lower(cells) != "nan"))  # nan: the finiteness check names it
     if bad.size:
-        raise InputError(source, column, text.iloc[bad[0]], "not a number", row=int(rows[bad[0]]))
-    return pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        raise InputError(source, column, str(cells[bad[0]]), "not a number", row=int(rows[bad[0]]))
+    return values
 
 
-def _not_numbers(text) -> np.ndarray:
-    """Cells that are not numbers (``nan`` is a number here: the finiteness check names it)."""
-    return (pd.to_numeric(text, errors="coerce").isna() & (text.str.lower() != "nan")).to_numpy()
-
-
-def _time_s(source: str, cmap: ColumnMap, frame, rows: np.ndarray) -> np.ndarray:
+def _time_s(source: str, cmap: ColumnMap, cells: Mapping[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
     """Seconds: from ``step_s`` and the file row, a column of seconds, or ISO 8601 date-times
-    (counted from the first kept sample)."""
+    (counted from the first kept sample; the first cell decides which)."""
     if cmap.step_s is not None:
         return cmap.step_s * (rows - rows[0])
-    series = frame[cmap.time_column]
-    if _is_number_column(series):
-        return series.to_numpy(dtype=float)
-    text = _text(series)
-    if not _not_numbers(text).any():
-        return pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
-    stamps = pd.to_datetime(text, format="ISO8601", utc=True, errors="coerce")
+    text = cells[cmap.time_column]
+    if not _is_text(text) or not np.isnan(pd.to_numeric(text[:1], errors="coerce").astype(float)[0]):
+        return _numbers(source, cmap.time_column, text, rows)
+    stamps = pd.to_datetime(pd.Series(text), format="ISO8601", utc=True, errors="coerce")
     bad = np.flatnonzero(stamps.isna().to_numpy())
     if bad.size:
-        raise InputError(source, cmap.time_column, text.iloc[bad[0]], "neither seconds nor an ISO 8601 date-time",
+        raise InputError(source, cmap.time_column, str(text[bad[0]]), "neither seconds nor an ISO 8601 date-time",
                          row=int(rows[bad[0]]))
     return (stamps - stamps.iloc[0]).dt.total_seconds().to_numpy(dtype=float)
 
@@ -409,8 +398,9 @@ def read_mapped_csv(path: str | Path, columns: ColumnMap, name: str | None = Non
     if frame.empty:
         raise InputError(source, "file", "header only", "no samples after the header", row=2)
     rows = np.arange(len(frame)) + 2
-    empty = {c: _empty_cells(frame[c]) for c in columns.source_columns}
-    incomplete = np.logical_or.reduce(list(empty.values()))
+    cells = {c: _cells(frame[c]) for c in columns.source_columns}
+    empty = {c: v == "" for c, v in cells.items() if _is_text(v)}
+    incomplete = np.logical_or.reduce([np.zeros(rows.size, dtype=bool), *empty.values()])
     if incomplete.any() and not columns.skip_incomplete:
         k = int(np.argmax(incomplete))
         column = next(c for c, e in empty.items() if e[k])
@@ -419,9 +409,9 @@ def read_mapped_csv(path: str | Path, columns: ColumnMap, name: str | None = Non
     keep = ~incomplete
     if not keep.any():
         raise InputError(source, "file", "no complete row", "every row has an empty cell in a mapped column")
-    frame, rows = frame[keep], rows[keep]
-    time_s = _time_s(source, columns, frame, rows)
-    table = {c: _numbers(source, c, frame[c], rows) for c in columns.source_columns if c != columns.time_column}
+    cells, rows = {c: v[keep] for c, v in cells.items()}, rows[keep]
+    time_s = _time_s(source, columns, cells, rows)
+    table = {c: _numbers(source, c, v, rows) for c, v in cells.items() if c != columns.time_column}
     signals = {c: s.values(table) for c, s in columns.columns.items()}
     row_of = lambda k: int(rows[k])  # noqa: E731
     _check_time(source, time_s, row_of, columns.time_column or "time_s")
