@@ -1,6 +1,7 @@
-"""`thermo-ddp identify|diagnose`: contract JSON keys, options before or after recordings, exit codes."""
+"""`thermo-ddp identify|diagnose|validate`: contract JSON keys, options before or after recordings, column maps, exit codes."""
 import json
 
+import numpy as np
 import pytest
 
 from thermo_ddp.cli import main
@@ -169,3 +170,19 @@ def test_planning_refuses_a_motor_that_is_not_a_talos_joint(capsys):
 
 def test_mechanical_refuses_a_motor_file(capsys):
     _one_line_exit_2(["identify", PADERBORN, "--physics", "mechanical", "--write-model", "x.toml"], capsys)
+
+
+def test_validate_of_a_runaway_says_so_and_exits_1(tmp_path, capsys):
+    """1000 A through a winding whose runaway current is ~50 A (eq. 8): the prediction overflows."""
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file, save_parameters
+    from thermo_ddp.recordings import Recording
+
+    hot = load_parameters(packaged_parameter_file("paderborn_pmsm")).replace("thermal", resistance_k_per_w=10.0)
+    model = tmp_path / "hot.toml"
+    save_parameters(hot, model)
+    t = np.arange(0.0, 30000.0, 10.0)
+    rec = Recording(name="r", time_s=t, current_a=np.full_like(t, 1000.0), temperature_c=np.full_like(t, 20.0))
+    out = tmp_path / "v.json"
+    assert main(["validate", str(rec.to_csv(tmp_path / "r.csv")), "--model", str(model), "--json", str(out)]) == 1
+    v = json.loads(out.read_text())
+    assert (v["success"], v["status"], v["rmse"]) == (False, "not_finite", None)

@@ -20,7 +20,6 @@ import csv
 import dataclasses
 import logging
 import math
-import re
 import tomllib
 import warnings
 from pathlib import Path

@@ -165,8 +165,11 @@ def validate_thermal(recordings, parameters: JointParameters | str | Path,
     grids = [thermal_grid(r, params, grid_settings) for r in recs]
     step, sensor = _simulator(params)
     name = parameters if isinstance(parameters, (str, Path)) else params.path
-    return Validation(str(name), tuple(_predict(step, sensor, g) for g in grids),
-                      rows or {"used": sum(len(r) for r in recs), "skipped": 0, "segments": len(recs)})
+    result = Validation(str(name), tuple(_predict(step, sensor, g) for g in grids),
+                        rows or {"used": sum(len(r) for r in recs), "skipped": 0, "segments": len(recs)})
+    if not result.success:
+        log.warning("%s: %s", result.model, result.message)
+    return result
 
 
 def validate_files(paths: Sequence[str | Path], parameters: str | Path, columns=None,
