@@ -77,7 +77,8 @@ def _model_outputs(args):
         raise InputError(option, option, args.model or args.write_model,
                          "a motor parameter file belongs to --physics thermal")
     inputs = [*args.recordings, *(p for p in (args.model, args.columns) if p)]
-    return Outputs.check({"--json": args.json, "--write-model": args.write_model}, inputs)
+    return Outputs.check({"--json": args.json, "--plot": getattr(args, "plot", None),
+                          "--write-model": args.write_model}, inputs)
 
 
 def _write_model(outputs, result: dict) -> None:
