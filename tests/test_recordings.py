@@ -1,6 +1,7 @@
 """Recordings: contract CSV validation, ROS 1 bag (real, written by ROS) and ROS 2 bag round trip."""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -9,8 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.recordings import (COLUMNS, Recording, TopicMap, common_time, read_bag, read_bag_joints, read_csv,
-                                   resample)
+from thermo_ddp.recordings import (COLUMNS, Recording, TopicMap, column_map_from_dict, common_time, load_column_map,
+                                   read_bag, read_bag_joints, read_csv, read_mapped_csv, resample)
 
 PANDA_TOPIC = "/joint_states_fake"
 
@@ -213,3 +214,119 @@ def test_ros2_current_from_joint_state_effort(tmp_path):
     truth = _write_ros2_bag(tmp_path / "bag2", n=20)
     rec = read_bag(tmp_path / "bag2", TopicMap("arm_left_4_joint", joint_states=None, current="/joint_states"))
     np.testing.assert_allclose(rec.current_a, truth["effort"], atol=1e-12)
+
+
+# ---------- column maps: any CSV's own columns ----------
+
+def _messy_csv(path: Path, data) -> dict:
+    """A log as real ones are: own column names, ISO 8601 stamps (some quoted, some quoted twice), empty
+    cells, a gap; returns what a correct reader must produce."""
+    n = data.draw(st.integers(4, 40), label="rows")
+    step = data.draw(st.sampled_from([0.25, 1.0, 2.5]), label="step_s")
+    gap_after = data.draw(st.integers(1, n - 2), label="gap after row")
+    t = step * np.arange(n) + np.where(np.arange(n) > gap_after, 1000.0, 0.0)
+    rng = np.random.default_rng(data.draw(st.integers(0, 2 ** 16), label="seed"))
+    temp, i_d, i_q = rng.uniform(20, 90, n), rng.normal(0, 50, n), rng.normal(0, 50, n)
+    rpm = rng.uniform(-3000, 3000, n)
+    empty = set(data.draw(st.lists(st.integers(0, n - 1), max_size=n // 3, unique=True), label="empty rows"))
+    start = np.datetime64("2022-10-26T08:17:21.847")
+    lines = ["Num,Stamp,T_wind ,i_d,i_q,speed_rpm,notes"]
+    for k in range(n):
+        stamp = str(start + np.timedelta64(int(round(t[k] * 1000)), "ms")) + "Z"
+        stamp = data.draw(st.sampled_from([stamp, f'"{stamp}"', f'"""{stamp}"""']), label="quoting")
+        cells = [str(k), stamp, *(repr(float(x[k])) for x in (temp, i_d, i_q, rpm)), "x"]
+        if k in empty:
+            cells[data.draw(st.integers(2, 5), label="empty column")] = ""
+        lines.append(",".join(cells))
+    path.write_text("\n".join(lines) + "\n")
+    keep = np.array([k not in empty for k in range(n)])
+    return {"t": t[keep] - t[keep][0], "temperature_c": temp[keep], "current_a": np.hypot(i_d, i_q)[keep],
+            "velocity": (rpm * np.pi / 30)[keep], "skipped": len(empty), "gap_s": 1000.0 * 0.5}
+
+
+MESSY_MAP = {"time": {"column": "Stamp"},
+             "columns": {"temperature_c": "T_wind", "current_a": {"norm": ["i_d", "i_q"]},
+                         "velocity": {"column": "speed_rpm", "scale": math.pi / 30}},
+             "rows": {"skip_incomplete": True, "split_gaps_s": 500.0}}
+
+
+@fuzz
+@given(data=st.data())
+def test_column_map_reads_messy_logs(tmp_path, data):
+    truth = _messy_csv(tmp_path / "log.csv", data)
+    if truth["t"].size == 0:
+        return
+    read = read_mapped_csv(tmp_path / "log.csv", column_map_from_dict(MESSY_MAP, "map.toml"))
+    assert read.rows["skipped"] == truth["skipped"] and read.rows["used"] == truth["t"].size
+    jumps = np.flatnonzero(np.diff(truth["t"]) > 500.0)
+    assert read.rows["segments"] == jumps.size + 1
+    for column in ("temperature_c", "current_a", "velocity"):
+        np.testing.assert_allclose(np.concatenate([getattr(r, column) for r in read.recordings]), truth[column],
+                                   rtol=1e-12, err_msg=column)
+    time_s = np.concatenate([r.time_s for r in read.recordings])
+    np.testing.assert_allclose(time_s, truth["t"], atol=1e-6)  # ms stamps
+
+
+def _map_file(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "map.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, field", [
+    ('[time]\ncolumn = "t"\n[columns]\ntemperature_c = "T"\n[rows]\nskip_empty = true\n', "rows.skip_empty"),
+    ('[time]\ncolumn = "t"\n[columns]\ntorque = "T"\n', "columns.torque"),
+    ('[time]\ncolumn = "t"\nstep_s = 1.0\n[columns]\ncurrent_a = "i"\n', "[time]"),
+    ('[time]\nstep_s = -1\n[columns]\ncurrent_a = "i"\n', "time.step_s"),
+    ('[time]\ncolumn = "t"\n[columns]\ncurrent_a = { norm = "i" }\n', "columns.current_a.norm"),
+    ('[time]\ncolumn = "t"\n[columns]\ncurrent_a = { column = "i", gain = 2 }\n', "columns.current_a.gain"),
+    ('[time]\ncolumn = "t"\n[colums]\ncurrent_a = "i"\n', "[colums]"),
+    ('[time]\ncolumn = "t"\n[columns]\n', "[columns]"),
+])
+def test_bad_column_map_names_map_and_key(tmp_path, text, field):
+    with pytest.raises(InputError) as err:
+        load_column_map(_map_file(tmp_path, text))
+    assert err.value.field == field and "map.toml" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_column_map_missing_column_empty_cell_and_bad_stamp(tmp_path):
+    cmap = load_column_map(_map_file(tmp_path, '[time]\ncolumn = "Stamp"\n[columns]\ncurrent_a = "I"\n'))
+    csv_path = tmp_path / "log.csv"
+    csv_path.write_text("Stamp,J\n2022-10-26T08:00:00Z,1\n")
+    with pytest.raises(InputError) as err:
+        read_mapped_csv(csv_path, cmap)
+    assert (err.value.field, err.value.row) == ("I", 1) and "log.csv" in str(err.value)
+    csv_path.write_text("Stamp,I\n2022-10-26T08:00:00Z,1\n2022-10-26T08:00:01Z,\n")
+    with pytest.raises(InputError, match="skip_incomplete") as err:
+        read_mapped_csv(csv_path, cmap)
+    assert (err.value.field, err.value.row) == ("I", 3)
+    csv_path.write_text("Stamp,I\n2022-10-26T08:00:00Z,1\n26/10/2022 08:00:01,2\n")
+    with pytest.raises(InputError, match="ISO 8601") as err:
+        read_mapped_csv(csv_path, cmap)
+    assert (err.value.field, err.value.row) == ("Stamp", 3)
+
+
+def test_step_time_scale_offset_and_default_gap_split(tmp_path):
+    """step_s: the time of a row is its position in the file; dropped rows keep the time base; a gap of
+    more than 10 median steps splits."""
+    cmap = column_map_from_dict({"time": {"step_s": 0.5}, "columns": {"temperature_c": {"column": "K", "offset": -273.15}},
+                                 "rows": {"skip_incomplete": True}}, "m")
+    csv_path = tmp_path / "s.csv"
+    csv_path.write_text("K,note\n300,a\n301,b\n,c\n302,d\n")
+    read = read_mapped_csv(csv_path, cmap)
+    rec, = read.recordings
+    np.testing.assert_allclose(rec.time_s, [0.0, 0.5, 1.5])  # the empty row (file row 4) is skipped, counted
+    np.testing.assert_allclose(rec.temperature_c, [26.85, 27.85, 28.85])
+    assert read.rows == {"used": 3, "skipped": 1, "segments": 1}
+    stamps = np.r_[np.arange(20.0), 40.0 + np.arange(5.0)]
+    csv_path.write_text("t,I\n" + "".join(f"{t},{t}\n" for t in stamps))
+    read = read_mapped_csv(csv_path, column_map_from_dict({"time": {"column": "t"}, "columns": {"current_a": "I"}}))
+    assert [len(r) for r in read.recordings] == [20, 5] and read.recordings[1].time_s[0] == 40.0
+
+
+@pytest.mark.parametrize("column, value", [("current_a", "2e4"), ("velocity", "-3e4"), ("voltage_v", "1e5")])
+def test_implausible_magnitudes_named(tmp_path, column, value):
+    path = _write(tmp_path / "m.csv", ["time_s", column], [["0", "1"], ["1", value]])
+    with pytest.raises(InputError, match="implausible") as err:
+        read_csv(path)
+    assert (err.value.field, err.value.row) == (column, 3)

@@ -87,22 +87,69 @@ def _write_json(data: dict, path: str | None) -> None:
         raise InputError(path, "--json", path, f"cannot write ({err.strerror})") from None
 
 
+def _model_outputs(args):
+    """The run's file outputs, checked before any work (against every input and each other)."""
+    from .outputs import Outputs
+    if args.physics == "mechanical" and (args.model or args.write_model):
+        option = "--model" if args.model else "--write-model"
+        raise InputError(option, option, args.model or args.write_model,
+                         "a motor parameter file belongs to --physics thermal")
+    inputs = [*args.recordings, *(p for p in (args.model, args.columns) if p)]
+    return Outputs.check({"--json": args.json, "--plot": getattr(args, "plot", None),
+                          "--write-model": args.write_model}, inputs)
+
+
+def _write_model(outputs, result: dict) -> None:
+    """Write the identified / improved parameter file (--write-model) when the run produced one."""
+    from .model.parameters import dumps_parameters, parameters_from_dict
+    if not outputs.wanted("--write-model"):
+        return
+    if result.get("parameter_file") is None:
+        logging.getLogger(__name__).warning("no parameter file to write: the fit failed (%s)", result.get("message"))
+        return
+    params = parameters_from_dict(result["parameter_file"], "--write-model")
+    outputs.text("--write-model", dumps_parameters(params))
+    outputs.commit()
+
+
 def _identify(args) -> int:
+    outputs = _model_outputs(args)
     if args.physics == "mechanical":
-        from .identify.mechanical import identify_mechanical_files as run
+        from .identify.mechanical import identify_mechanical_files
+        result = identify_mechanical_files(args.recordings, columns=args.columns)
     else:
-        from .identify.thermal import identify_thermal_files as run
-    _write_json(run(args.recordings), args.json)
+        from .identify.thermal import identify_thermal_files
+        result = identify_thermal_files(args.recordings, parameters=args.model, columns=args.columns)
+    _write_json(result, args.json)
+    _write_model(outputs, result)
     return 0
 
 
 def _diagnose(args) -> int:
+    outputs = _model_outputs(args)
     if args.physics == "mechanical":
-        from .diagnose.mechanical import diagnose_mechanical_files as run
+        from .diagnose.mechanical import diagnose_mechanical_files
+        result = diagnose_mechanical_files(args.recordings, plot=args.plot, columns=args.columns)
     else:
-        from .diagnose.thermal import diagnose_thermal_files as run
-    _write_json(run(args.recordings, plot=args.plot), args.json)
+        from .diagnose.thermal import diagnose_thermal_files
+        result = diagnose_thermal_files(args.recordings, plot=args.plot, parameters=args.model, columns=args.columns)
+    _write_json(result, args.json)
+    _write_model(outputs, result)
     return 0
+
+
+def _validate(args) -> int:
+    from .outputs import Outputs
+    from .validate import validate_files
+    inputs = [*args.recordings, args.model, *([args.columns] if args.columns else [])]
+    outputs = Outputs.check({"--json": args.json, "--plot": args.plot}, inputs)
+    result = validate_files(args.recordings, args.model, args.columns)
+    print(result.report())
+    outputs.json("--json", result.to_dict())
+    if result.success:
+        outputs.figure("--plot", result.plot)
+    outputs.commit()
+    return 0 if result.success else 1
 
 
 class _Parser(argparse.ArgumentParser):
@@ -114,12 +161,23 @@ class _Parser(argparse.ArgumentParser):
 
 def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns); required")
-    cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal",
-                     help="which physics to model (default %(default)s)")
-    cmd.add_argument("--json", metavar="OUT", help="write the result JSON here (default: stdout)")
+    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns, or any "
+                                                                  "columns with --columns); required")
+    if name == "validate":
+        cmd.add_argument("--model", metavar="TOML", required=True, help="parameter file to validate; required")
+    else:
+        cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal",
+                         help="which physics to model (default %(default)s)")
+        cmd.add_argument("--model", metavar="TOML", help="parameter file: fixed values and start values (default: "
+                                                         "the packaged models/arm_left_4_joint.toml)")
+        cmd.add_argument("--write-model", metavar="OUT.toml", help="write the identified / improved parameter "
+                                                                   "file here (default: none)")
+    cmd.add_argument("--columns", metavar="MAP.toml", help="column map: how the CSVs' own columns become the "
+                                                           "recording contract (default: contract columns)")
+    cmd.add_argument("--json", metavar="OUT", help="write the result JSON here (default: "
+                                                   f"{'none' if name == 'validate' else 'stdout'})")
     if plot:
-        cmd.add_argument("--plot", metavar="OUT.png", help="write the diagnosis figure here (default: none)")
+        cmd.add_argument("--plot", metavar="OUT.png", help=f"write the {name} figure here (default: none)")
     return cmd
 
 
@@ -199,6 +257,8 @@ COMMANDS = {
     "identify": (lambda: _recording_parser("identify", "identify parameters from recordings", False), _identify),
     "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "
                                                        "physics, refit and validate", True), _diagnose),
+    "validate": (lambda: _recording_parser("validate", "predict recordings with a parameter file as it is "
+                                                       "(no refit) and report the error", True), _validate),
     "cache": (_cache_parser, _cache),
     "sweep": (_sweep_parser, _sweep),
 }

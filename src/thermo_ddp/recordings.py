@@ -3,9 +3,12 @@
 The CSV contract (docs/architecture.md): a header row, one sample per row, ``time_s`` (strictly
 increasing seconds) and any of ``current_a``, ``temperature_c`` (the casing sensor), ``position``,
 ``velocity``, ``effort`` (ROS ``JointState`` meaning, SI units of the joint), ``ambient_c``,
-``voltage_v``.  Every problem with the input raises one :class:`~thermo_ddp.errors.InputError`
-naming the file, the column (or topic) and the row.  Rows are counted as in the file: the
-header is row 1, the first sample row 2.  For bags and in-memory arrays the row is the sample
+``voltage_v``.  Any other CSV is read through a :class:`ColumnMap` (``--columns MAP.toml``): its own
+column names, date-time stamps, scales, rows with empty cells and gaps that split it into segments.
+CSV files are parsed by pandas' C reader.  Every problem with the input raises one
+:class:`~thermo_ddp.errors.InputError` naming the file (or map), the column (or key) and the row.
+Rows are counted as in the file: the header is row 1, the first sample row 2 (blank lines are not
+counted).  For bags and in-memory arrays the row is the sample
 index (0-based) on the recording's time base.
 
 A bag is read through a :class:`TopicMap` (one joint).  Several joints of one bag are read in
@@ -16,12 +19,17 @@ from __future__ import annotations
 import csv
 import dataclasses
 import logging
+import math
+import tomllib
+import warnings
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+import pandas as pd
 
 from .errors import InputError
+from .model.parameters import BOUNDS
 
 log = logging.getLogger(__name__)
 
@@ -29,32 +37,42 @@ SIGNALS = ("current_a", "temperature_c", "position", "velocity", "effort", "ambi
 COLUMNS = ("time_s",) + SIGNALS
 _CELSIUS_COLUMNS = ("temperature_c", "ambient_c")
 KELVIN_SUSPECT_C = 200.0  # a motor casing or a room above 200 degC means the file holds kelvin
+# Largest plausible magnitudes: the parameter catalogue's bound of the matching motor quantity.
+PLAUSIBLE = {"current_a": "current_peak_a", "voltage_v": "bus_voltage_v", "velocity": "iron_loss_ref_speed_rad_s"}
 JOINT_STATE_FIELDS = ("position", "velocity", "effort")
 _JOINT_STATE = "sensor_msgs/msg/JointState"
 _SCALAR_TYPES = {"sensor_msgs/msg/Temperature": "temperature", "std_msgs/msg/Float64": "data",
                  "std_msgs/msg/Float32": "data"}
 
 
-def _check_signal(source: str, column: str, values: np.ndarray, row_of) -> None:
-    """Raise InputError on the first NaN/inf or kelvin-looking temperature in ``values``."""
+def _check_signal(source: str, column: str, values: np.ndarray, row_of, kind: str | None = None) -> None:
+    """Raise InputError on the first NaN/inf, kelvin-looking temperature or implausible magnitude in
+    ``values`` (``kind``: the contract column, when ``column`` names it differently in messages)."""
+    kind = kind or column
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
         raise InputError(source, column, values[bad[0]], "not a finite number", row=row_of(bad[0]))
-    if column in _CELSIUS_COLUMNS:
+    if kind in _CELSIUS_COLUMNS:
         hot = np.flatnonzero((values > KELVIN_SUSPECT_C) | (values < -273.15))
         if hot.size:
             raise InputError(source, column, float(values[hot[0]]),
                              f"outside -273.15..{KELVIN_SUSPECT_C:g} degC: looks like kelvin or a wrong unit; "
                              "give degrees Celsius", row=row_of(hot[0]))
+    if kind in PLAUSIBLE:
+        bound = BOUNDS[PLAUSIBLE[kind]]
+        big = np.flatnonzero(np.abs(values) > bound.high)
+        if big.size:
+            raise InputError(source, column, float(values[big[0]]), f"implausible: above {bound.high:g} {bound.unit} "
+                             f"in magnitude ({bound.reason}); a wrong unit or scale?", row=row_of(big[0]))
 
 
-def _check_time(source: str, time_s: np.ndarray, row_of) -> None:
-    _check_signal(source, "time_s", time_s, row_of)
+def _check_time(source: str, time_s: np.ndarray, row_of, column: str = "time_s") -> None:
+    _check_signal(source, column, time_s, row_of)
     step = np.diff(time_s)
     bad = np.flatnonzero(step <= 0)
     if bad.size:
         k = bad[0] + 1
-        raise InputError(source, "time_s", float(time_s[k]),
+        raise InputError(source, column, float(time_s[k]),
                          f"not strictly increasing (previous sample {time_s[k - 1]!r})", row=row_of(k))
 
 
@@ -130,46 +148,310 @@ class Recording:
         return path
 
 
-def _parse_cell(source: str, column: str, cell: str, row: int) -> float:
+# ----------------------------------------------------------------------------- column maps
+@dataclasses.dataclass(frozen=True)
+class Source:
+    """One contract column from the CSV's own columns: ``value * scale + offset``, where ``value`` is
+    the single column, or the Euclidean norm of several (``norm``, e.g. the d and q currents)."""
+
+    columns: tuple[str, ...]
+    norm: bool = False
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def label(self, contract: str) -> str:
+        """How errors name the column: ``temperature_c``, or ``temperature_c (from stator_winding)``."""
+        if not self.norm and self.columns == (contract,) and (self.scale, self.offset) == (1.0, 0.0):
+            return contract
+        return f"{contract} (from {'norm of ' if self.norm else ''}{', '.join(self.columns)})"
+
+    def values(self, table: Mapping[str, np.ndarray]) -> np.ndarray:
+        parts = [table[c] for c in self.columns]
+        value = np.sqrt(sum(p * p for p in parts)) if self.norm else parts[0]
+        return value * self.scale + self.offset
+
+
+_MAP_KEYS = {"time": ("column", "step_s"), "columns": SIGNALS, "rows": ("skip_incomplete", "split_gaps_s")}
+_SOURCE_KEYS = ("column", "norm", "scale", "offset")
+GAP_FACTOR = 10.0  # default split: a gap longer than 10 median sample steps
+
+
+@dataclasses.dataclass(frozen=True)
+class ColumnMap:
+    """How a CSV's own columns become the recording contract (docs/architecture.md, "Column map").
+
+    Time: ``time_column`` (seconds, or ISO 8601 date-times, quoted or not; date-times count from the
+    first sample) or a fixed ``step_s``.  ``skip_incomplete``: drop rows with an empty cell in a mapped
+    column (counted) instead of refusing the file.  ``split_gaps_s``: a longer gap between samples
+    splits the file into segments (None: ``GAP_FACTOR`` x the median step; inf: never)."""
+
+    source: str
+    columns: Mapping[str, Source]
+    time_column: str | None = "time_s"
+    step_s: float | None = None
+    skip_incomplete: bool = False
+    split_gaps_s: float | None = None
+
+    @property
+    def source_columns(self) -> tuple[str, ...]:
+        """The CSV columns the map reads (time first), each once."""
+        names = ([self.time_column] if self.time_column else []) + [c for s in self.columns.values() for c in s.columns]
+        return tuple(dict.fromkeys(names))
+
+    @classmethod
+    def contract(cls, header: Sequence[str], source: str) -> "ColumnMap":
+        """The identity map of a contract CSV (never split: the recording is one piece)."""
+        return cls(source, {c: Source((c,)) for c in header if c != "time_s"}, split_gaps_s=math.inf)
+
+
+def _map_error(source: str, key: str, value, problem: str) -> InputError:
+    return InputError(source, key, value if isinstance(value, str) else repr(value), problem)
+
+
+def _map_number(source: str, key: str, value, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _map_error(source, key, value, "expected a finite number")
+    if positive and value <= 0:
+        raise _map_error(source, key, value, "must be > 0")
+    return float(value)
+
+
+def _map_section(source: str, data: Mapping, section: str) -> Mapping:
+    sec = data.get(section, {})
+    if not isinstance(sec, Mapping):
+        raise _map_error(source, f"[{section}]", sec, "expected a table")
+    for key in sec:
+        if key not in _MAP_KEYS[section]:
+            raise _map_error(source, f"{section}.{key}", sec[key], f"unknown key; known: {', '.join(_MAP_KEYS[section])}")
+    return sec
+
+
+def _map_source(source: str, key: str, spec) -> Source:
+    if isinstance(spec, str):
+        spec = {"column": spec}
+    if not isinstance(spec, Mapping):
+        raise _map_error(source, key, spec, 'expected "column", { column = ... } or { norm = [...] }')
+    for k in spec:
+        if k not in _SOURCE_KEYS:
+            raise _map_error(source, f"{key}.{k}", spec[k], f"unknown key; known: {', '.join(_SOURCE_KEYS)}")
+    if ("column" in spec) == ("norm" in spec):
+        raise _map_error(source, key, dict(spec), "give exactly one of column, norm")
+    names = [spec["column"]] if "column" in spec else spec["norm"]
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) and n for n in names):
+        raise _map_error(source, f"{key}.{'column' if 'column' in spec else 'norm'}", names,
+                         "expected a column name (norm: a list of names)")
+    return Source(tuple(names), "norm" in spec, *(_map_number(source, f"{key}.{k}", spec.get(k, d))
+                                                   for k, d in (("scale", 1.0), ("offset", 0.0))))
+
+
+def column_map_from_dict(data: Mapping, source: str = "<column map>") -> ColumnMap:
+    """Validate a parsed column map; errors name the map and the key."""
+    for section in data:
+        if section not in _MAP_KEYS:
+            raise _map_error(source, f"[{section}]", "section", f"unknown section; known: {', '.join(_MAP_KEYS)}")
+    time, cols, rows = (_map_section(source, data, s) for s in _MAP_KEYS)
+    if ("column" in time) == ("step_s" in time):
+        raise _map_error(source, "[time]", dict(time), "give exactly one of column, step_s")
+    column = time.get("column")
+    if column is not None and (not isinstance(column, str) or not column):
+        raise _map_error(source, "time.column", column, "expected a column name")
+    step = _map_number(source, "time.step_s", time["step_s"], positive=True) if "step_s" in time else None
+    if not cols:
+        raise _map_error(source, "[columns]", "empty", f"map at least one of {', '.join(SIGNALS)}")
+    skip = rows.get("skip_incomplete", False)
+    if not isinstance(skip, bool):
+        raise _map_error(source, "rows.skip_incomplete", skip, "expected true or false")
+    split = rows.get("split_gaps_s")
+    split = None if split is None else _map_number(source, "rows.split_gaps_s", split, positive=True)
+    return ColumnMap(source, {k: _map_source(source, f"columns.{k}", v) for k, v in cols.items()},
+                     column, step, skip, split)
+
+
+def load_column_map(path: str | Path) -> ColumnMap:
+    """Read and validate a column map (TOML, ``--columns MAP.toml``)."""
+    source = str(path)
     try:
-        return float(cell)
-    except ValueError:
-        raise InputError(source, column, cell, "not a number", row=row) from None
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(source, "file", "unreadable", f"cannot read the column map ({err})") from None
+    except tomllib.TOMLDecodeError as err:
+        raise InputError(source, "TOML", "<file>", f"not valid TOML ({err})") from None
+    return column_map_from_dict(data, source)
+
+
+# ----------------------------------------------------------------------------- CSV (pandas)
+@dataclasses.dataclass(frozen=True)
+class RecordingSet:
+    """Recordings read from files, one per segment, with the rows used and skipped (``rows``:
+    the contract's ``{"used", "skipped", "segments"}``)."""
+
+    recordings: tuple[Recording, ...]
+    used: int
+    skipped: int = 0
+
+    @property
+    def rows(self) -> dict[str, int]:
+        return {"used": self.used, "skipped": self.skipped, "segments": len(self.recordings)}
+
+    def __add__(self, other: "RecordingSet") -> "RecordingSet":
+        return RecordingSet(self.recordings + other.recordings, self.used + other.used, self.skipped + other.skipped)
+
+
+def _header(source: str, path: Path) -> list[str]:
+    try:
+        with path.open(newline="") as handle:
+            first = next(csv.reader(handle), [])
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(source, "file", "unreadable", str(err)) from None
+    header = [cell.strip() for cell in first]
+    if not any(header):
+        raise InputError(source, "file", "empty", "no header row and no samples")
+    if len(set(header)) != len(header):
+        raise InputError(source, "header", ",".join(header), "a column appears twice", row=1)
+    return header
+
+
+def _table(source: str, path: Path, width: int):
+    """The CSV as a table of numbers or text (pandas' C parser; no cell is read as missing).  Every
+    column is read: a row with more cells than the header is refused, never silently cut."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            return pd.read_csv(path, na_filter=False, index_col=False, skipinitialspace=True, engine="c",
+                               encoding_errors="strict")
+    except (pd.errors.ParserError, pd.errors.ParserWarning):
+        row, cells = _long_row(path, width)
+        raise InputError(source, "row", f"{cells} cells", f"the header has {width}", row=row) from None
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise InputError(source, "file", "unreadable", str(err).strip().splitlines()[0]) from None
+
+
+def _long_row(path: Path, width: int) -> tuple[int | None, int]:
+    """(row, cells) of the first row with more cells than the header (only called on a parser error)."""
+    with path.open(newline="") as handle:
+        for row, cells in enumerate((c for c in csv.reader(handle) if c), start=1):
+            if len(cells) > width:
+                return row, len(cells)
+    return None, width
+
+
+def _cells(series) -> np.ndarray:
+    """A column as floats (a numeric column) or as stripped text without quotes (logs quote time
+    stamps, sometimes several times); numpy's vectorised string functions."""
+    if pd.api.types.is_numeric_dtype(series.dtype) and not pd.api.types.is_bool_dtype(series.dtype):
+        return series.to_numpy(dtype=float)
+    return np.char.strip(np.char.strip(np.char.strip(series.to_numpy(dtype=str)), '"'))
+
+
+def _is_text(cells: np.ndarray) -> bool:
+    return cells.dtype.kind == "U"
+
+
+def _numbers(source: str, column: str, cells: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A column as floats; InputError naming the first cell that is not a number."""
+    if not _is_text(cells):
+        return cells
+    values = pd.to_numeric(cells, errors="coerce").astype(float)
+    bad = np.flatnonzero(np.isnan(values) & (np.char.lower(cells) != "nan"))  # nan: the finiteness check names it
+    if bad.size:
+        raise InputError(source, column, str(cells[bad[0]]), "not a number", row=int(rows[bad[0]]))
+    return values
+
+
+def _time_s(source: str, cmap: ColumnMap, cells: Mapping[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
+    """Seconds: from ``step_s`` and the file row, a column of seconds, or ISO 8601 date-times
+    (counted from the first kept sample; the first cell decides which)."""
+    if cmap.step_s is not None:
+        return cmap.step_s * (rows - rows[0])
+    text = cells[cmap.time_column]
+    if not _is_text(text) or not np.isnan(pd.to_numeric(text[:1], errors="coerce").astype(float)[0]):
+        return _numbers(source, cmap.time_column, text, rows)
+    stamps = pd.to_datetime(pd.Series(text), format="ISO8601", utc=True, errors="coerce")
+    bad = np.flatnonzero(stamps.isna().to_numpy())
+    if bad.size:
+        raise InputError(source, cmap.time_column, str(text[bad[0]]), "neither seconds nor an ISO 8601 date-time",
+                         row=int(rows[bad[0]]))
+    return (stamps - stamps.iloc[0]).dt.total_seconds().to_numpy(dtype=float)
+
+
+def _split(time_s: np.ndarray, split_gaps_s: float | None) -> list[tuple[int, int]]:
+    """[start, stop) of the segments between gaps longer than ``split_gaps_s``."""
+    dt = np.diff(time_s)
+    limit = GAP_FACTOR * float(np.median(dt)) if split_gaps_s is None and dt.size else split_gaps_s
+    cuts = [0, *(np.flatnonzero(dt > limit) + 1 if dt.size and limit is not None else ()), time_s.size]
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def read_mapped_csv(path: str | Path, columns: ColumnMap, name: str | None = None) -> RecordingSet:
+    """Read any CSV through a column map: one :class:`Recording` per segment (named ``name#k`` when
+    the file splits), validated with the CSV's own row numbers (header row 1)."""
+    path = Path(path)
+    source, name = str(path), name or path.name
+    header = _header(source, path)
+    for column in columns.source_columns:
+        if column not in header:
+            raise InputError(source, column, "missing", f"no such column (wanted by {columns.source}); "
+                             f"the CSV has: {', '.join(header)}", row=1)
+    frame = _table(source, path, len(header))
+    frame.columns = header  # stripped names (logs have trailing spaces)
+    if frame.empty:
+        raise InputError(source, "file", "header only", "no samples after the header", row=2)
+    rows = np.arange(len(frame)) + 2
+    cells = {c: _cells(frame[c]) for c in columns.source_columns}
+    empty = {c: v == "" for c, v in cells.items() if _is_text(v)}
+    incomplete = np.logical_or.reduce([np.zeros(rows.size, dtype=bool), *empty.values()])
+    if incomplete.any() and not columns.skip_incomplete:
+        k = int(np.argmax(incomplete))
+        column = next(c for c, e in empty.items() if e[k])
+        raise InputError(source, column, "", f"empty cell (set [rows] skip_incomplete = true in a column map "
+                         "to drop such rows)", row=int(rows[k]))
+    keep = ~incomplete
+    if not keep.any():
+        raise InputError(source, "file", "no complete row", "every row has an empty cell in a mapped column")
+    cells, rows = {c: v[keep] for c, v in cells.items()}, rows[keep]
+    time_s = _time_s(source, columns, cells, rows)
+    table = {c: _numbers(source, c, v, rows) for c, v in cells.items() if c != columns.time_column}
+    signals = {c: s.values(table) for c, s in columns.columns.items()}
+    row_of = lambda k: int(rows[k])  # noqa: E731
+    _check_time(source, time_s, row_of, columns.time_column or "time_s")
+    for column, values in signals.items():
+        _check_signal(source, columns.columns[column].label(column), values, row_of, kind=column)
+    segments = _split(time_s, columns.split_gaps_s)
+    recordings = tuple(Recording(name=name if len(segments) == 1 else f"{name}#{k + 1}", source=source,
+                                 row_offset=int(rows[a]), time_s=time_s[a:b], **{c: v[a:b] for c, v in signals.items()})
+                       for k, (a, b) in enumerate(segments))
+    return RecordingSet(recordings, int(keep.sum()), int(incomplete.sum()))
 
 
 def read_csv(path: str | Path, name: str | None = None) -> Recording:
-    """Read a contract CSV into a :class:`Recording` (InputError on any bad cell, row or column)."""
+    """Read a contract CSV (columns named as in the contract) into one :class:`Recording`."""
     path = Path(path)
     source = str(path)
-    try:
-        with path.open(newline="") as handle:
-            lines = list(csv.reader(handle))
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(source, "file", "unreadable", str(err)) from None
-    lines = [line for line in lines if any(cell.strip() for cell in line)]
-    if not lines:
-        raise InputError(source, "file", "empty", "no header row and no samples")
-    header = [cell.strip() for cell in lines[0]]
+    header = _header(source, path)
     for column in header:
         if column not in COLUMNS:
             raise InputError(source, column or "(empty header cell)", "column",
-                             f"unknown column; the contract columns are {', '.join(COLUMNS)}", row=1)
-    if len(set(header)) != len(header):
-        raise InputError(source, "header", ",".join(header), "a column appears twice", row=1)
+                             f"unknown column; the contract columns are {', '.join(COLUMNS)} "
+                             "(other names: give a column map)", row=1)
     if "time_s" not in header:
         raise InputError(source, "time_s", "missing", "every recording needs a time_s column", row=1)
-    rows = lines[1:]
-    if not rows:
-        raise InputError(source, "file", "header only", "no samples after the header", row=2)
-    data = np.empty((len(rows), len(header)))
-    for i, cells in enumerate(rows):
-        if len(cells) != len(header):
-            raise InputError(source, "row", ",".join(cells), f"{len(cells)} cells, header has {len(header)}", row=i + 2)
-        for j, cell in enumerate(cells):
-            data[i, j] = _parse_cell(source, header[j], cell.strip(), i + 2)
-    columns = {c: data[:, j] for j, c in enumerate(header)}
-    return Recording(name=name or path.name, source=source, row_offset=2, **columns)
+    return read_mapped_csv(path, ColumnMap.contract(header, source), name).recordings[0]
 
+
+def read_recordings(paths: Sequence[str | Path], columns: ColumnMap | str | Path | None = None) -> RecordingSet:
+    """CSV files (contract columns, or any columns through ``columns``, a map or its TOML path) ->
+    their recordings, one per segment, and the rows used and skipped."""
+    cmap = load_column_map(columns) if isinstance(columns, (str, Path)) else columns
+    out = RecordingSet((), 0)
+    for path in paths:
+        if cmap is None:
+            rec = read_recording(path)
+            out += RecordingSet((rec,), len(rec))
+        else:
+            if Path(path).suffix.lower() != ".csv":
+                raise InputError(str(path), "file", Path(path).suffix or "directory", "a column map reads .csv files")
+            out += read_mapped_csv(path, cmap)
+    return out
 
 def resample(recording: Recording, time_s: Sequence[float] | np.ndarray) -> Recording:
     """Linear interpolation of every column onto ``time_s`` (which must lie inside the recording)."""

@@ -27,7 +27,7 @@ from .._config import checked_settings, require
 from ..errors import InputError
 from ..identify.mechanical import (BASELINE_TERMS, STRIBECK_VELOCITY, JointKinematics, MechanicalSettings,
                                    fit_kinematics, joint_kinematics, predict_effort)
-from ..recordings import Recording, as_recordings
+from ..recordings import Recording, as_recordings, read_recordings
 from .localise import Localisation, LocaliseSettings, ResidualSeries, localise
 from .selection import ModelFit, SelectedTerms, Selection, SelectionSettings, TermSpec, forward_select
 from .._figures import new_figure
@@ -223,9 +223,12 @@ def diagnose_mechanical(recordings: Sequence[Recording | str | Path] | Recording
                      message="diagnosis ran" if ok else selection.final.fit.message)
 
 
-def diagnose_mechanical_files(paths: Sequence[str | Path], plot: str | Path | None = None, **options) -> dict:
-    """CLI entry: CSV recording paths -> the contract's diagnosis dict (optionally a plot file)."""
-    diagnosis = diagnose_mechanical([Path(p) for p in paths], **options)
+def diagnose_mechanical_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,
+                              **options) -> dict:
+    """CLI entry: CSV recording paths (any columns through the column map ``columns``) -> the
+    contract's diagnosis dict with ``rows`` (optionally a plot file)."""
+    recordings = read_recordings(paths, columns)
+    diagnosis = diagnose_mechanical(list(recordings.recordings), **options)
     if plot is not None:
         diagnosis.plot(plot)
-    return diagnosis.to_dict()
+    return diagnosis.to_dict() | {"rows": recordings.rows}

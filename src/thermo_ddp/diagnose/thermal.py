@@ -44,7 +44,7 @@ from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, Therma
                                 default_fixed, fit_grids, load_joint_parameters, network_model, parameter_file,
                                 start_values)
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, thermal_grid
-from ..recordings import as_recordings
+from ..recordings import as_recordings, read_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
                                 thermal_regimes)
 from .localise import Localisation, ResidualSeries
@@ -363,12 +363,17 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                             "diagnosis ran" if ok else f"final fit failed: {final_fit.message}")
 
 
-def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, **options) -> dict:
-    """CLI entry: CSV recording paths -> the diagnosis dict (optionally a plot file)."""
-    diagnosis = diagnose_thermal([Path(p) for p in paths], **options)
+def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,
+                           **options) -> dict:
+    """CLI entry: CSV recording paths (any columns through the column map ``columns``; ``parameters``:
+    the parameter file) -> the diagnosis dict with ``rows`` (optionally a plot file)."""
+    if options.get("parameters") is not None:
+        options["parameters"] = load_joint_parameters(options["parameters"])  # refused before reading data
+    recordings = read_recordings(paths, columns)
+    diagnosis = diagnose_thermal(list(recordings.recordings), **options)
     if plot is not None:
         diagnosis.plot(plot)
-    return diagnosis.to_dict()
+    return diagnosis.to_dict() | {"rows": recordings.rows}
 
 
 __all__ = ["CANDIDATE_TERMS", "ThermalDiagnosis", "ThermalDiagnosisSettings", "diagnose_thermal",

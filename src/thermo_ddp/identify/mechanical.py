@@ -206,12 +206,14 @@ def identify_torque_current(recordings: Recording | Sequence[Recording]) -> FitR
 
 
 def identify_mechanical_files(paths: Sequence[str], terms: Sequence[str] = REFERENCE_TERMS,
-                              settings: MechanicalSettings | None = None) -> dict:
-    """CLI entry (``thermo-ddp identify --physics mechanical``): CSV paths -> a JSON-ready dict."""
-    from ..recordings import read_recording
+                              settings: MechanicalSettings | None = None, columns=None) -> dict:
+    """CLI entry (``thermo-ddp identify --physics mechanical``): CSV paths (any columns through the
+    column map ``columns``) -> a JSON-ready dict."""
+    from ..recordings import read_recordings
 
-    recordings = [read_recording(p) for p in paths]
+    read = read_recordings(paths, columns)
+    recordings = list(read.recordings)
     fit = identify_mechanical(recordings, terms, settings)
-    return {"physics": "mechanical", "recordings": [r.name for r in recordings], **fit.summary(),
+    return {"physics": "mechanical", "recordings": [r.name for r in recordings], "rows": read.rows, **fit.summary(),
             "stderr": dict(fit.stderr), "n_samples": fit.n_samples,
             "success": fit.success, "status": fit.status, "message": fit.message}

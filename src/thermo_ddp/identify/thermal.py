@@ -57,7 +57,7 @@ from scipy import optimize
 from .._config import require
 from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
                                 packaged_parameter_file, parameters_from_dict, unit)
-from ..recordings import as_recordings
+from ..recordings import as_recordings, read_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, integrated_autocorrelation, result_from_jacobian
 from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
@@ -551,11 +551,13 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
 
 
 def identify_thermal_files(paths: Sequence[str | Path], model: str = "one_node", *,
-                           parameters: JointParameters | str | Path | None = None) -> dict:
-    """CLI entry (``thermo-ddp identify --physics thermal``): CSV paths -> a JSON-ready dict."""
+                           parameters: JointParameters | str | Path | None = None, columns=None) -> dict:
+    """CLI entry (``thermo-ddp identify --physics thermal``): CSV paths (any columns through the
+    column map ``columns``) -> a JSON-ready dict with ``rows`` and the identified ``parameter_file``."""
     params = load_joint_parameters(parameters)
-    fit = identify_thermal([Path(p) for p in paths], model, parameters=params)
-    return {"physics": "thermal", "recordings": list(fit.recordings), **fit.summary(),
+    recordings = read_recordings(paths, columns)
+    fit = identify_thermal(list(recordings.recordings), model, parameters=params)
+    return {"physics": "thermal", "recordings": list(fit.recordings), "rows": recordings.rows, **fit.summary(),
             "stderr": dict(fit.stderr), "confidence_95": {k: list(v) for k, v in fit.confidence.items()},
             "initial_offset_c": dict(fit.initial_offset_c), "n_samples": fit.n_samples,
             "success": fit.success, "status": fit.status, "message": fit.message,

@@ -1,0 +1,21 @@
+"""notebooks/real_motors.ipynb runs end to end on the repository's real recordings (issue 12's figures)."""
+import json
+
+from conftest import ROOT, run_notebook
+
+
+def test_real_motors_notebook(tmp_path, monkeypatch):
+    monkeypatch.setenv("THERMO_DDP_REPO", str(ROOT))
+    text = run_notebook("real_motors.ipynb", tmp_path, monkeypatch)
+    result = json.loads((tmp_path / "real_motors.json").read_text())
+    pad = result["paderborn"]
+    held = pad["held_out_rmse"]
+    assert held["copper + iron"] <= min(held["copper only"] / 3, 4.0)
+    assert pad["validate_rmse"]["written file (+ iron)"] < pad["validate_rmse"]["packaged copper-only file"]
+    assert pad["iron_cv_gain"] > 0.5  # the diagnosis' held-out evidence for the running loss
+    assert pad["not_determinable"]["rms_prediction_difference_k"] < 0.5  # constant vs k w^2: same prediction
+    for joint, r in result["ur3"].items():
+        assert r["success"] and r["later_rmse"] <= 1.0, joint
+        assert r["rows"] == {"used": 7355, "skipped": 54, "segments": 3}
+    assert "identified on first 75 %" in text
+    assert (tmp_path / "paderborn_later.png").stat().st_size > 10_000
