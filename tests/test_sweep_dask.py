@@ -5,6 +5,7 @@ import json
 import os
 import signal
 import threading
+import time
 
 import pytest
 
@@ -44,18 +45,24 @@ def test_local_cluster_equals_serial_seed_for_seed(serial):
 def test_killed_worker_loses_no_run(serial):
     seeds = run_seeds(3, 4)
     with dask_client(EngineSettings(workers=2)) as client:
-        pids = list(client.run(os.getpid).values())
-        killed = threading.Event()
+        pids = client.run(os.getpid)
+        lost: list = []
 
-        def kill():  # once a worker is busy with its first run
-            os.kill(pids[0], signal.SIGKILL)
-            killed.set()
+        def kill_a_busy_worker():  # as soon as a worker holds a run, kill it (SIGKILL: no clean-up)
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline:
+                busy = [(w, keys) for w, keys in client.processing().items() if keys and w in pids]
+                if busy:
+                    lost.extend(busy[0][1])
+                    os.kill(pids[busy[0][0]], signal.SIGKILL)
+                    return
+                time.sleep(0.05)
 
-        timer = threading.Timer(4.0, kill)
-        timer.start()
+        killer = threading.Thread(target=kill_a_busy_worker)
+        killer.start()
         outcomes = map_tasks(client, sweep_run, seeds, progress=False, short=True)
-        timer.cancel()
-    assert killed.is_set(), "the sweep ended before the worker was killed: the test proved nothing"
+        killer.join()
+    assert lost, "no worker was killed while holding a run: the test proved nothing"
     assert all(o.success for o in outcomes), [o.message for o in outcomes]
     assert_same_runs([o.value for o in outcomes], serial.runs)
 

@@ -71,7 +71,8 @@ class ControllerSettings:
     horizon_knots: int = 200
     integrator: str = "rk4"              # planner's and observer's step over one control period
     max_iterations: int = 50             # DDP iterations per re-solve
-    feasibility_tolerance: float = 1e-4  # largest constraint violation of an accepted plan
+    feasibility_tolerance: float = 1e-3  # largest constraint violation of an accepted plan (mK, mrad, mV:
+                                         # below what the sensors resolve)
     warm_penalty_max: float = 1e6        # cap on the AL penalty carried from one re-solve to the next
     hold_step_s: float = 0.5             # the remaining hold is shortened by this when infeasible
     max_retries: int = 4                 # shortened re-solves per control period

@@ -67,7 +67,7 @@ def dask_client(settings: EngineSettings = EngineSettings()) -> Iterator[Any]:
 
     if settings.scheduler is None:
         with LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=None, silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
             yield client
         return
     _probe(settings)
