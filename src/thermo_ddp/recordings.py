@@ -73,7 +73,7 @@ def _check_time(source: str, time_s: np.ndarray, row_of, column: str = "time_s")
     if bad.size:
         k = bad[0] + 1
         raise InputError(source, column, float(time_s[k]),
-                         f"not strictly increasing (previous sample {time_s[k - 1]!r})", row=row_of(k))
+                         f"not strictly increasing (previous sample {float(time_s[k - 1])!r})", row=row_of(k))
 
 
 @dataclasses.dataclass(frozen=True)
