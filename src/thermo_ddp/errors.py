@@ -13,4 +13,15 @@ class InputError(ValueError):
         self.source, self.field, self.value, self.problem, self.row = source, field, value, problem, row
         where = f"{source}" + (f" row {row}" if row is not None else "")
         shown = value if isinstance(value, str) else repr(value)
-        super().__init__(f"{where}: {field} = {shown}: {problem}")
+        if len(shown) > MAX_SHOWN:
+            shown = shown[:MAX_SHOWN] + "..."
+        super().__init__(one_line(f"{where}: {field} = {shown}: {problem}"))
+
+
+MAX_SHOWN = 120  # characters of a bad value shown in a message (a whole CSV row or file is not)
+
+
+def one_line(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped as in Python literals (a line
+    feed becomes backslash-n): a message is one line."""
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)

@@ -7,7 +7,7 @@ import numpy as np
 
 from .._config import require
 from ..model.actuated import load_model
-from ..model.arm import ELBOW
+from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import BOUNDS, Bound
 from ..tasks._common import DEFAULT_HOLD_S, HOLD_S, first_crossing, limit_pair_c
 
@@ -48,6 +48,7 @@ class HoldDemo:
 def hold_demo(payload_kg: float = 40.0, hold_s: float = DEFAULT_HOLD_S, dt_s: float = 0.01) -> HoldDemo:
     """Hold ``payload_kg`` with the forearm horizontal for ``hold_s`` from idle: the winding at 10, 30 and
     60 s and when it reaches the elbow file's cut-off and short-term limits."""
+    payload_kg = PAYLOAD_KG.check(_SRC, "payload_kg", payload_kg, "out of range")
     hold_s = HOLD_S.check(_SRC, "hold_s", hold_s, "out of range")
     dt_s = DT_S.check(_SRC, "dt_s", dt_s, "out of range")
     steps = max(1, round(hold_s / dt_s))
