@@ -177,3 +177,11 @@ def test_demo_says_when_the_motor_cannot_hold(capsys):
     temps = [float(line.split()[4]) for line in out.splitlines() if line.strip().startswith("winding after")
              and "burns" not in line]
     assert all(t <= 400 for t in temps) and "burns" in out
+
+
+def test_file_whose_motor_overheats_at_rest_refused(tmp_path, elbow_file, capsys):
+    """Every value in range, but a 10 kW drive idle heat puts the resting winding at thousands of °C:
+    the plan is refused before it is solved, not reported with absurd temperatures."""
+    hot = tmp_path / "hot.toml"
+    hot.write_text(elbow_file.read_text().replace("drive_idle_w = 23.0", "drive_idle_w = 1e4", 1))
+    refused(["plan", "--model", str(hot), "--hold-s", "1"], capsys, str(hot), "idle winding", "at rest")

@@ -96,6 +96,16 @@ def check_knots(source: str, knots: int, dt_s: float) -> None:
             f"at most {MAX_KNOTS} knots per horizon (memory and solve time grow with them): shorten it or raise dt_s")
 
 
+def check_idle_below_limits(model: ActuatedArm, limits_c: Mapping[str, float]) -> None:
+    """At rest (no current, drive idle heat only) every winding settles below its limit; otherwise the
+    file cannot describe a motor that works at all (e.g. a drive idle heat of kilowatts)."""
+    idle = model.idle_temperatures()[winding_indices(model)]
+    for j, w in zip(model.joints, idle):
+        require(w < limits_c[j], model.params[j].path, "thermal", f"idle winding {w:.1f} °C",
+                f"at rest the winding settles above the limit {limits_c[j]:g} °C: check the drive's idle heat "
+                "and the thermal resistances")
+
+
 def check_in_joint_range(model: ActuatedArm, source: str, name: str, joint: str, angle_rad: float) -> None:
     """``angle_rad`` of ``joint`` inside the URDF joint range (closed)."""
     lo, hi = (float(b[model.joints.index(joint)]) for b in joint_range_rad(model))

@@ -29,7 +29,8 @@ from ..model.parameters import Bound, load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from ._common import (DEFAULT_HOLD_S, HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_fields,
-                      check_in_joint_range, check_knots, check_limit_c, first_crossing, joint_limit_c, format_s, initial_guess, is_feasible, joint_limit_constraints, limit_pair_c,
+                      check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c, first_crossing,
+                      format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints, limit_pair_c,
                       solver_summary, winding_limits_c)
 
 log = logging.getLogger(__name__)
@@ -194,7 +195,9 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
-    settings = dataclasses.replace(settings, limit_c=winding_limits_c(model, settings.limit_c)[model.joints[0]])
+    limits = winding_limits_c(model, settings.limit_c)
+    check_idle_below_limits(model, limits)
+    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]])
     for name in ("start_rad", "goal_rad"):
         check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
