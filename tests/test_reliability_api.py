@@ -80,3 +80,13 @@ def test_lift_settings_bound_the_work(options, words):
 def test_hold_demo_bounds_the_work(kwargs):
     with pytest.raises(InputError):
         hold_demo(**kwargs)
+
+
+@pytest.mark.parametrize("options, words", [
+    ({"hold_s": float("inf")}, "finite"), ({"payload_kg": "x"}, "number"), ({"hold_s": 0.0}, "hold_s"),
+    ({"dt_s": 0.001, "hold_s": 3600.0}, "50000 knots"), ({"move_s": -1.0}, "move_s"),
+])
+def test_whole_arm_settings_bound_the_work(options, words):
+    from thermo_ddp.tasks.whole_arm import WholeArmSettings
+    with pytest.raises(InputError, match=words):
+        WholeArmSettings(**options)

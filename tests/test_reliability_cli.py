@@ -185,3 +185,9 @@ def test_file_whose_motor_overheats_at_rest_refused(tmp_path, elbow_file, capsys
     hot = tmp_path / "hot.toml"
     hot.write_text(elbow_file.read_text().replace("drive_idle_w = 23.0", "drive_idle_w = 1e4", 1))
     refused(["plan", "--model", str(hot), "--hold-s", "1"], capsys, str(hot), "idle winding", "at rest")
+
+
+def test_json_onto_the_packaged_default_model_refused(elbow_file, capsys):
+    before = elbow_file.read_bytes()
+    refused(["plan", "--json", str(elbow_file)], capsys, "also an input")
+    assert elbow_file.read_bytes() == before

@@ -12,6 +12,7 @@ import json
 import logging
 import math
 import sys
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -128,8 +129,9 @@ def _result(data: dict, out: Outputs, stdout: bool = True) -> int:
 
 
 def _outputs(args) -> Outputs:
-    """Every output of ``args`` checked against every input and each other (before any work)."""
-    inputs = []
+    """Every output of ``args`` checked against every input (the packaged parameter files included: the
+    default models) and each other, before any work."""
+    inputs = sorted(Path(str(resources.files("thermo_ddp").joinpath("models"))).glob("*.toml"))  # default models
     for name in INPUT_ARGS:
         value = getattr(args, name, None)
         inputs += list(value) if isinstance(value, (list, tuple)) else [value] if value else []
