@@ -43,6 +43,7 @@ from _common import write
 FAULTS = ("traceback", "unclear_refusal", "hang", "data_loss", "silent_garbage", "subprocess_mismatch")
 CLASSES = ("ok", "refused", "failed") + FAULTS
 WINDING_RANGE_C = (-60.0, 400.0)  # beyond: no room, no insulation (models/*.toml bounds)
+NOISE_LIMIT_K = 0.5  # a casing sensor's noise is tenths of a kelvin: a fit 10x worse does not explain the data
 
 
 # --------------------------------------------------------------------------------------------
@@ -123,6 +124,13 @@ def thermal_csv(rng, rows=40, fuzz=0.0):
     return "\n".join(lines) + "\n"
 
 
+def noise_csv(rng, rows=120):
+    """Current and temperature drawn at random each sample: a recording no thermal model explains."""
+    lines = ["time_s,current_a,temperature_c"]
+    lines += [f"{10 * k},{rng.uniform(-10, 10):.3f},{rng.uniform(20, 120):.3f}" for k in range(rows)]
+    return "\n".join(lines) + "\n"
+
+
 def mechanical_csv(rng, rows=400, fuzz=0.0):
     lines = ["time_s,position,velocity,effort"]
     for k in range(rows):
@@ -188,6 +196,9 @@ def make_case(rng, k, folder, elbow_text):
                     *[number(rng, ["84", "140"]) for _ in range(rng.randint(1, 3))]]
         out = rng.choice(["earlier.json", "theirs", "no/such/run", "", "rec.csv"])
         return ["loop", "--short", "--out", out, f"--hold-s={number(rng, ['20'])}"]
+    if kind == 5 and rng.random() < 0.3:  # a garbage recording: noise no thermal model explains
+        (folder / "fuzzed.csv").write_text(noise_csv(rng))
+        return ["diagnose", "fuzzed.csv", "--json", "out.json"]
     if kind in (4, 5):  # fuzzed thermal recordings
         (folder / "fuzzed.csv").write_text(thermal_csv(rng, rows=rng.randint(0, 60), fuzz=rng.choice([0.0, 0.02, 0.1])))
         verb = rng.choice(["identify", "identify", "diagnose"])
@@ -252,6 +263,9 @@ def garbage_in(argv, stdout: str, folder: Path) -> str | None:
             return f"JSON: {err}"
         if d.get("success") is False:
             return "exit 0 with success: false"
+        final = d.get("final") or {}
+        if argv[0] == "diagnose" and final.get("rmse", 0.0) > NOISE_LIMIT_K * 10 and d.get("status") != "model_does_not_fit":
+            return f"diagnosed as fine with a final rmse of {final['rmse']:.1f} K (status {d.get('status')})"
         for key in ("winding_c", "casing_c"):
             flat = [x for row in d.get(key, []) for x in row]
             if flat and not (WINDING_RANGE_C[0] <= min(flat) and max(flat) <= WINDING_RANGE_C[1]):
@@ -265,7 +279,7 @@ def classify(argv, result, before, after, folder) -> tuple[str, str]:
         return "hang", ""
     code, err = result["code"], result["stderr"].strip()
     if result["escaped"] or "Traceback (most recent call last)" in err:
-        return "traceback", (result["escaped"] or err)[-600:]
+        return "traceback", (result["escaped"] or err)[-1500:]
     asked = outputs_of(argv)
     changed = sorted(k for k in before if after.get(k) != before[k])
     # an input, or any file not asked for, must never change; a refused run changes nothing (a run that

@@ -191,3 +191,10 @@ def test_json_onto_the_packaged_default_model_refused(elbow_file, capsys):
     before = elbow_file.read_bytes()
     refused(["plan", "--json", str(elbow_file)], capsys, "also an input")
     assert elbow_file.read_bytes() == before
+
+
+@pytest.mark.parametrize("rows", [1, 2])
+def test_mechanical_diagnosis_of_a_tiny_recording_refused(rows, tmp_path, capsys):
+    rec = tmp_path / "tiny.csv"
+    rec.write_text("time_s,position,velocity,effort\n" + "".join(f"{k},0,0,1\n" for k in range(rows)))
+    refused(["diagnose", "--physics", "mechanical", str(rec)], capsys, str(rec), "too short")
