@@ -340,6 +340,7 @@ def main():
     counts = {c: 0 for c in CLASSES}
     examples: dict[str, list] = {c: [] for c in FAULTS + ("failed",)}
     by_verb: dict[str, dict[str, int]] = {}
+    refusals: dict[str, dict] = {}  # one example of each kind of refusal message, to read
     sample = set(random.Random(args.seed + 1).sample(range(args.cases), min(args.subprocess_sample, args.cases)))
     start, runner = time.perf_counter(), Worker()
     root = Path(tempfile.mkdtemp(prefix="thermo-ddp-fuzz-"))
@@ -367,6 +368,9 @@ def main():
             by_verb[verb][cls] += 1
             if cls in examples and len(examples[cls]) < 8:
                 examples[cls].append({"argv": argv, "detail": detail})
+            shape = re.sub(r"[\d.e+-]+|'[^']*'|\S+\.(csv|toml|json|png)", "#", detail)
+            if cls == "refused" and shape not in refusals and len(refusals) < 40:
+                refusals[shape] = {"argv": argv, "message": detail}
             if (k + 1) % 100 == 0:
                 print(f"{k + 1} cases, {time.perf_counter() - start:.0f} s: "
                       f"{ {c: n for c, n in counts.items() if n} }", flush=True)
@@ -377,7 +381,8 @@ def main():
     elapsed = time.perf_counter() - start
     write("fuzz_cli", {"cases": args.cases, "seed": args.seed, "timeout_s": args.timeout_s,
                        "subprocess_sample": len(sample), "elapsed_s": round(elapsed, 1), "counts": counts,
-                       "faults": sum(counts[c] for c in FAULTS), "by_verb": by_verb, "examples": examples})
+                       "faults": sum(counts[c] for c in FAULTS), "by_verb": by_verb, "examples": examples,
+                       "refusal_samples": list(refusals.values())})
     print(json.dumps(counts))
     return 1 if any(counts[c] for c in FAULTS) else 0
 

@@ -8,7 +8,7 @@ import tomllib
 
 import pytest
 import tomli_w
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from thermo_ddp.cli import main
@@ -19,6 +19,7 @@ from thermo_ddp.recordings import COLUMNS, read_csv
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 ELBOW_AMBIENT_C, ELBOW_WINDING_MAX_C = 26.0, 140.0  # the packaged elbow file (models/arm_left_4_joint.toml)
+ELBOW_IDLE_C = 43.0  # seed report: the idle motor settles near 43 °C in a 26 °C room (drive heat)
 
 
 class WorkStarted(Exception):
@@ -87,7 +88,8 @@ def test_plan_numbers(payload, hold, limit):
     argv = ["plan", f"--payload-kg={payload}", f"--hold-s={hold}"] + ([] if limit is None else [f"--limit-c={limit}"])
     outcome, err = _cli(argv, ["thermo_ddp.tasks.lift.make_solver"])
     p, h, lim = _parsed(payload), _parsed(hold), None if limit is None else _parsed(limit)
-    limit_ok = limit is None or _inside(lim, ELBOW_AMBIENT_C, ELBOW_WINDING_MAX_C, open_low=True)
+    assume(lim is None or abs(lim - ELBOW_IDLE_C) > 0.5)  # a limit must lie above the winding at rest
+    limit_ok = limit is None or _inside(lim, ELBOW_IDLE_C, ELBOW_WINDING_MAX_C, open_low=True)
     _check(outcome, err, _inside(p, 0, 100) and _inside(h, 0, 3600) and limit_ok)
 
 

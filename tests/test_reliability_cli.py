@@ -184,7 +184,7 @@ def test_file_whose_motor_overheats_at_rest_refused(tmp_path, elbow_file, capsys
     the plan is refused before it is solved, not reported with absurd temperatures."""
     hot = tmp_path / "hot.toml"
     hot.write_text(elbow_file.read_text().replace("drive_idle_w = 23.0", "drive_idle_w = 1e4", 1))
-    refused(["plan", "--model", str(hot), "--hold-s", "1"], capsys, str(hot), "idle winding", "at rest")
+    refused(["plan", "--model", str(hot), "--hold-s", "1"], capsys, str(hot), "at rest", "limit_c")
 
 
 def test_json_onto_the_packaged_default_model_refused(elbow_file, capsys):
@@ -198,3 +198,9 @@ def test_mechanical_diagnosis_of_a_tiny_recording_refused(rows, tmp_path, capsys
     rec = tmp_path / "tiny.csv"
     rec.write_text("time_s,position,velocity,effort\n" + "".join(f"{k},0,0,1\n" for k in range(rows)))
     refused(["diagnose", "--physics", "mechanical", str(rec)], capsys, str(rec), "too short")
+
+
+def test_loop_limit_below_the_resting_winding_refused_before_the_experiments(tmp_path, capsys):
+    out = tmp_path / "run"
+    refused(["loop", "--short", "--limits-c", "30", "--out", str(out)], capsys, "limit_c", "at rest")
+    assert list(tmp_path.iterdir()) == []  # no run folder, no temporary one

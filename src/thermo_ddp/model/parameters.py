@@ -297,8 +297,11 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
     for key in LIMIT_KEYS:
         _above_ambient(source, f"limits.{key}", getattr(limits, key), thermal.ambient_c)
     sources = data.get("sources", {})
-    if not isinstance(sources, Mapping) or not all(isinstance(v, str) for v in sources.values()):
+    if not isinstance(sources, Mapping):
         raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
+    for key, text in sources.items():
+        if not isinstance(text, str):
+            raise InputError(source, f"sources.{key}", repr(text), "expected \"free text\": where the value comes from")
     return JointParameters(joint, motor, thermal, limits, dict(sources), source)
 
 

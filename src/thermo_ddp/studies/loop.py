@@ -40,11 +40,11 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require, settings_from_mapping
-from ..model.actuated import ActuatedArm
+from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
-from ..tasks._common import HOLD_S, check_fields, check_limit_c, joint_limit_c
+from ..tasks._common import HOLD_S, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
@@ -465,6 +465,9 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     if out_dir is None:
         out_dir = Path(tempfile.mkdtemp(prefix="thermo-ddp-loop-"))
     out_dir = Path(out_dir)
+    elbow = load_model((ELBOW,))  # a limit the resting winding already exceeds is refused before the experiments
+    for lim in settings.limits_c:
+        check_idle_below_limits(elbow, {ELBOW: lim})
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
     recordings = record_experiments(robot, settings)

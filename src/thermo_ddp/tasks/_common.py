@@ -101,9 +101,9 @@ def check_idle_below_limits(model: ActuatedArm, limits_c: Mapping[str, float]) -
     file cannot describe a motor that works at all (e.g. a drive idle heat of kilowatts)."""
     idle = model.idle_temperatures()[winding_indices(model)]
     for j, w in zip(model.joints, idle):
-        require(w < limits_c[j], model.params[j].path, "thermal", f"idle winding {w:.1f} °C",
-                f"at rest the winding settles above the limit {limits_c[j]:g} °C: check the drive's idle heat "
-                "and the thermal resistances")
+        require(w < limits_c[j], model.params[j].path, "limit_c", limits_c[j],
+                f"not above the winding's temperature at rest, {w:.1f} °C (the drive's idle heat): "
+                "raise the limit, or check [thermal]")
 
 
 def check_in_joint_range(model: ActuatedArm, source: str, name: str, joint: str, angle_rad: float) -> None:
