@@ -204,3 +204,46 @@ def test_loop_limit_below_the_resting_winding_refused_before_the_experiments(tmp
     out = tmp_path / "run"
     refused(["loop", "--short", "--limits-c", "30", "--out", str(out)], capsys, "limit_c", "at rest")
     assert list(tmp_path.iterdir()) == []  # no run folder, no temporary one
+
+
+@pytest.mark.parametrize("content", [None, b"\x89PNG\r\n\x1a\n\xff\xfe binary"])
+def test_unreadable_parameter_file_refused(content, tmp_path, capsys):
+    model = tmp_path / "model.toml"
+    if content is None:
+        model.mkdir()  # a folder where the file should be
+    else:
+        model.write_bytes(content)
+    refused(["plan", "--model", str(model)], capsys, str(model), "cannot read")
+
+
+@pytest.mark.parametrize("option", ["--json", "--plot"])
+def test_unusable_output_name_refused_before_work(option, tmp_path, capsys):
+    refused(["plan", option, str(tmp_path / ("a" * 300 + ".png"))], capsys, option, "not a usable path")
+
+
+def test_long_output_names_still_written(tmp_path):
+    """A target name near the system's limit: the temporary file beside it must not be longer."""
+    target = tmp_path / ("b" * 240 + ".json")
+    out = Outputs.check({"--json": target})
+    out.json("--json", {"ok": True})
+    out.commit()
+    assert json.loads(target.read_text()) == {"ok": True}
+
+
+@pytest.mark.parametrize("name, value", [("THERMO_DDP_CACHE", "file"), ("THERMO_DDP_CACHE_MAX_MB", "lots")])
+def test_bad_environment_refused(name, value, earlier, monkeypatch, capsys):
+    _, rec = earlier
+    monkeypatch.setenv(name, str(rec) if value == "file" else value)
+    refused(["demo"], capsys, name)
+
+
+def test_interrupted_run_writes_nothing(earlier, monkeypatch, capsys):
+    out, _ = earlier
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr("thermo_ddp.tasks.lift.make_solver", interrupted)
+    code, err = run(["plan", "--hold-s", "1", "--json", str(out)], capsys)
+    assert code == 130 and "interrupted" in err and "\n" not in err
+    assert out.read_text() == '{"earlier": true}\n' and sorted(p.name for p in out.parent.iterdir()) == [
+        "earlier.json", "rec.csv"]

@@ -249,15 +249,28 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")
     out = Outputs()
     try:
+        _check_environment()
         out = _outputs(args)
         status = run(args, out)
         written = _commit(out)
     except InputError as err:
         print(f"thermo-ddp: {err}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("thermo-ddp: interrupted; nothing written, earlier files unchanged", file=sys.stderr)
+        return 130
     finally:
         out.discard()
     return status if written else 1
+
+
+def _check_environment() -> None:
+    """The compiled-library cache settings ($THERMO_DDP_CACHE, $THERMO_DDP_CACHE_MAX_MB), before work."""
+    from .codegen import cache_dir, cache_max_bytes
+    folder = cache_dir()
+    if folder.exists() and not folder.is_dir():
+        raise InputError("environment", "THERMO_DDP_CACHE", str(folder), "is a file; expected a folder")
+    cache_max_bytes()
 
 
 def _commit(out: Outputs) -> bool:

@@ -36,6 +36,7 @@ def check_output_path(option: str, path: str | Path, inputs: Iterable[str | Path
     out = Path(path)
     if str(path).strip() == "":
         raise InputError(option, option, repr(str(path)), "expected a file name")
+    _check_name(option, out)
     if out.is_dir():
         raise InputError(str(out), option, str(out), "is a folder; expected a file name")
     _check_parent(option, out)
@@ -45,6 +46,21 @@ def check_output_path(option: str, path: str | Path, inputs: Iterable[str | Path
     if out.exists() and not out.is_file():
         raise InputError(str(out), option, str(out), "is not a regular file; expected a file name")
     return out
+
+
+def _check_name(option: str, out: Path) -> None:
+    """A path the system accepts (length, characters): stat it once and turn its refusal into one line."""
+    try:
+        out.exists()
+    except (OSError, ValueError) as err:
+        raise InputError(str(out)[:80], option, str(out), f"not a usable path ({getattr(err, 'strerror', err)})") from None
+
+
+def _temporary_beside(target: Path) -> Path:
+    """A new empty temporary file in ``target``'s folder (hidden; its name short enough for any target)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name[:40]}.", suffix=target.suffix[:20], dir=target.parent)
+    os.close(fd)
+    return Path(tmp)
 
 
 def _check_parent(option: str, out: Path) -> None:
@@ -68,10 +84,9 @@ def check_figure_path(option: str, path: str | Path, inputs: Iterable[str | Path
 def write_atomically(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it over ``path``."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    tmp = _temporary_beside(path)
     try:
-        write(Path(tmp))
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -92,6 +107,7 @@ def check_output_folder(option: str, path: str | Path, inputs: Iterable[str | Pa
     out = Path(path)
     if str(path).strip() == "":
         raise InputError(option, option, repr(str(path)), "expected a folder name")
+    _check_name(option, out)
     if out.exists() and not out.is_dir():
         raise InputError(str(out), option, str(out), "is a file; expected a folder")
     _check_parent(option, out)
@@ -108,13 +124,13 @@ def write_folder_atomically(path: str | Path, write: Callable[[Path], object]) -
     """Call ``write(tmp)`` on a fresh folder beside ``path``; when it returns, the folder (marked with
     :data:`RUN_MARKER`) replaces ``path``. A failed ``write`` leaves ``path`` as it was."""
     path = Path(path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name[:40]}.", dir=path.parent))
     old = None
     try:
         result = write(tmp)
         (tmp / RUN_MARKER).write_text("written by thermo-ddp; the next run into this folder replaces it\n")
         if path.is_dir() and any(path.iterdir()):
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name[:40]}.old.", dir=path.parent))
             os.replace(path, old / path.name)
         os.replace(tmp, path)
     except BaseException:
@@ -170,12 +186,10 @@ class Outputs:
         when the output is not wanted); :meth:`commit` renames it over the target."""
         if option not in self.paths:
             return None
-        target = self.paths[option]
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
-        os.close(fd)
+        tmp = _temporary_beside(self.paths[option])
         self._staged[option] = lambda into: os.replace(tmp, into)
-        self._temporaries.append(Path(tmp))
-        return Path(tmp)
+        self._temporaries.append(tmp)
+        return tmp
 
     def _stage(self, option: str, write: Callable[[Path], None]) -> None:
         if option in self.paths:
@@ -188,10 +202,8 @@ class Outputs:
         try:
             for option, write in self._staged.items():
                 target = self.paths[option]
-                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=target.suffix, dir=target.parent)
-                os.close(fd)
-                ready.append((Path(tmp), target))
-                write(Path(tmp))
+                ready.append((_temporary_beside(target), target))
+                write(ready[-1][0])
         except BaseException:
             self.discard(t for t, _ in ready)
             raise

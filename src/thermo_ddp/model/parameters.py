@@ -321,6 +321,8 @@ def load_parameters(path: str | Path) -> JointParameters:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise InputError(str(path), "file", str(path), "no such parameter file") from None
+    except (OSError, UnicodeDecodeError) as exc:  # a folder, no permission, a binary file
+        raise InputError(str(path), "file", str(path), f"cannot read a parameter file ({exc})") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(str(path), "TOML", "<file>", f"not valid TOML ({exc})") from None
     return parameters_from_dict(data, str(path))
