@@ -90,3 +90,14 @@ def test_whole_arm_settings_bound_the_work(options, words):
     from thermo_ddp.tasks.whole_arm import WholeArmSettings
     with pytest.raises(InputError, match=words):
         WholeArmSettings(**options)
+
+
+@pytest.mark.parametrize("kwargs", [{"q": [0.0, 0.0]}, {"v": [np.nan]}, {"temperatures_c": [30.0]}])
+def test_state_checks_each_part(model, kwargs):
+    with pytest.raises(InputError):
+        model.state(**kwargs)
+
+
+def test_static_current_checks_the_posture(model):
+    with pytest.raises(InputError, match="q"):
+        model.static_current_a([0.0, 1.0])

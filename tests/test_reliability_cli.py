@@ -247,3 +247,7 @@ def test_interrupted_run_writes_nothing(earlier, monkeypatch, capsys):
     assert code == 130 and "interrupted" in err and "\n" not in err
     assert out.read_text() == '{"earlier": true}\n' and sorted(p.name for p in out.parent.iterdir()) == [
         "earlier.json", "rec.csv"]
+
+
+def test_too_many_limits_refused(capsys):
+    refused(["compare", "--limits-c", *[str(84 + k) for k in range(9)]], capsys, "1 to 8")

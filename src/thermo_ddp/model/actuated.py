@@ -130,10 +130,19 @@ class ActuatedArm:
     def state(self, q=None, v=None, temperatures_c=None) -> np.ndarray:
         """A state vector; defaults: q = 0 (arm hanging), v = 0, the idle temperatures."""
         n = self.nu
-        q = np.zeros(n) if q is None else np.asarray(q, float)
-        v = np.zeros(n) if v is None else np.asarray(v, float)
-        t = self.idle_temperatures() if temperatures_c is None else np.asarray(temperatures_c, float)
+        q = np.zeros(n) if q is None else self._vector("q", q, n, "rad")
+        v = np.zeros(n) if v is None else self._vector("v", v, n, "rad/s")
+        nt = self.nx - 2 * n
+        t = self.idle_temperatures() if temperatures_c is None else self._vector("temperatures_c", temperatures_c, nt, "°C")
         return np.concatenate([q, v, t])
+
+    @staticmethod
+    def _vector(name: str, value, size: int, unit: str) -> np.ndarray:
+        """``value`` as ``size`` finite numbers (InputError naming ``name``, the shape and the unit)."""
+        a = _finite_array(name, value, f"shape ({size},) in {unit}").reshape(-1)
+        if a.size != size:
+            raise InputError(_SRC, name, f"{a.size} values", f"expected {size} (one per joint or node) in {unit}")
+        return a
 
     # --- functions --------------------------------------------------------------------
     def step(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
@@ -151,7 +160,7 @@ class ActuatedArm:
 
     def static_current_a(self, q) -> np.ndarray:
         """Currents that hold posture ``q`` at rest (gravity only; friction is zero at v = 0)."""
-        g = self.arm.gravity_torque_nm(q)
+        g = self.arm.gravity_torque_nm(self._vector("q", q, self.nu, "rad"))
         return np.array([float(motor.current_for_torque_a(self.params[j].motor, g[k]))
                          for k, j in enumerate(self.joints)])
 

@@ -44,7 +44,7 @@ from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
-from ..tasks._common import HOLD_S, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
+from ..tasks._common import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
@@ -93,7 +93,8 @@ class LoopSettings:
     progress: bool | None = None
 
     def __post_init__(self):
-        require(len(self.limits_c) > 0, _SRC, "limits_c", self.limits_c, "give at least one winding limit")
+        require(0 < len(self.limits_c) <= MAX_LIMITS, _SRC, "limits_c", self.limits_c,
+                f"give 1 to {MAX_LIMITS} winding limits (each is a plan and a closed loop per model)")
         elbow = load_parameters(packaged_parameter_file(ELBOW))  # every limit checked before the experiments
         object.__setattr__(self, "limits_c", tuple(joint_limit_c(elbow, check_limit_c(_SRC, v)) for v in self.limits_c))
         check_fields(self, _SRC, {"payload_kg": PAYLOAD_KG, "hold_s": HOLD_S})

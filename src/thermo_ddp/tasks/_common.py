@@ -39,6 +39,7 @@ ACTIVE_TOL = 1e-3         # a constraint within this of its bound is binding
 HOLD_S = Bound(0.0, 3600.0, "s", "one hour: the casing settles within tens of minutes (seed report), so a "
                                  "longer hold adds knots, not information")
 MAX_KNOTS = 50_000        # knots of one transcribed horizon: memory and solve time grow linearly with them
+MAX_LIMITS = 8            # winding limits compared in one run (each is a complete plan or closed loop)
 
 
 # --------------------------------------------------------------------------------------------

@@ -28,10 +28,10 @@ from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import Bound, load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
-from ._common import (DEFAULT_HOLD_S, HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_fields,
-                      check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c, first_crossing,
-                      format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints, limit_pair_c,
-                      solver_summary, winding_limits_c)
+from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
+                      check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
+                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
+                      limit_pair_c, solver_summary, winding_limits_c)
 
 log = logging.getLogger(__name__)
 
@@ -409,7 +409,8 @@ def compare_limits(payload_kg: float = 40.0, limits_c=None, hold_s: float = DEFA
     winding limit (:func:`thermo_ddp.tasks._common.limit_pair_c`: 84 °C and 140 °C)."""
     params = load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW))
     limits_c = limit_pair_c(params) if limits_c is None else tuple(limits_c)
-    require(len(limits_c) > 0, _SRC, "limits_c", limits_c, "give at least one winding limit")
+    require(0 < len(limits_c) <= MAX_LIMITS, _SRC, "limits_c", limits_c,
+            f"give 1 to {MAX_LIMITS} winding limits (each is a complete plan)")
     for lim in limits_c:  # every limit checked before the first plan
         joint_limit_c(params, check_limit_c(_SRC, lim))
     return LimitComparison(tuple(plan_lift(payload_kg, lim, hold_s, **options) for lim in limits_c))
