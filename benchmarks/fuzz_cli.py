@@ -143,7 +143,7 @@ def mechanical_csv(rng, rows=400, fuzz=0.0):
 
 
 PARAM_VALUES = ["nan", "inf", "-inf", "0.0", "-1.0", "1e-300", "1e300", '"text"', "true", "[1, 2]", "-500.0",
-                "1e4", "0.5"]
+                "1e4", "0.5", "1e-3", "1e3", "99.0", "5e3", "0.02", "250.0"]  # the last: in range, extreme
 
 
 def fuzzed_model(rng, text):
@@ -161,7 +161,7 @@ def fuzzed_model(rng, text):
     return "\n".join(lines) + "\n"
 
 
-def make_case(rng, k, folder, elbow_text):
+def make_case(rng, k, folder, elbow_text, kinds=tuple(range(10))):
     """The argument list of case ``k``; its files written into ``folder``."""
     (folder / "rec.csv").write_text(thermal_csv(rng))
     (folder / "mech.csv").write_text(mechanical_csv(rng))
@@ -172,7 +172,7 @@ def make_case(rng, k, folder, elbow_text):
     (folder / "theirs" / "notes.txt").write_text("another tool's file")
     outputs = ["out.json", "earlier.json", "rec.csv", "model.toml", "mech.csv", "theirs", "no/such/dir/x.json",
                "", ".", "earlier.png", "out.xyz", "theirs/notes.txt"]
-    kind = k % 10
+    kind = kinds[k % len(kinds)]
     if kind == 0:  # demo numbers
         return ["demo", f"--payload-kg={number(rng, ['0', '10', '40', '99'])}",
                 f"--hold-s={number(rng, ['0', '1', '30', '120', '600'])}"]
@@ -330,6 +330,8 @@ def main():
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timeout-s", type=float, default=120.0)
     parser.add_argument("--subprocess-sample", type=int, default=40, help="cases also run as real processes")
+    parser.add_argument("--kinds", type=int, nargs="+", default=list(range(10)),
+                        help="case kinds to generate (0-9, see make_case; default all, in turn)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
@@ -348,7 +350,7 @@ def main():
         for k in range(args.cases):
             folder = root / f"case{k:05d}"
             folder.mkdir()
-            argv = make_case(rng, k, folder, elbow_text)
+            argv = make_case(rng, k, folder, elbow_text, tuple(args.kinds))
             twin = root / f"twin{k:05d}"
             if k in sample:  # the same files for the real process
                 shutil.copytree(folder, twin)
@@ -379,7 +381,7 @@ def main():
         runner.close()
         shutil.rmtree(root, ignore_errors=True)
     elapsed = time.perf_counter() - start
-    write("fuzz_cli", {"cases": args.cases, "seed": args.seed, "timeout_s": args.timeout_s,
+    write("fuzz_cli", {"cases": args.cases, "seed": args.seed, "kinds": args.kinds, "timeout_s": args.timeout_s,
                        "subprocess_sample": len(sample), "elapsed_s": round(elapsed, 1), "counts": counts,
                        "faults": sum(counts[c] for c in FAULTS), "by_verb": by_verb, "examples": examples,
                        "refusal_samples": list(refusals.values())})

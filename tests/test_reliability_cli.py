@@ -251,3 +251,12 @@ def test_interrupted_run_writes_nothing(earlier, monkeypatch, capsys):
 
 def test_too_many_limits_refused(capsys):
     refused(["compare", "--limits-c", *[str(84 + k) for k in range(9)]], capsys, "1 to 8")
+
+
+def test_an_output_the_library_did_not_write_keeps_the_earlier_file(tmp_path):
+    earlier = tmp_path / "d.png"
+    earlier.write_bytes(b"earlier figure")
+    out = Outputs.check({"--plot": earlier}, figures=("--plot",))
+    assert out.temporary("--plot").is_file()  # handed to a library that, here, never draws
+    assert out.commit() == [] and earlier.read_bytes() == b"earlier figure"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.png"]

@@ -197,7 +197,8 @@ class Outputs:
 
     def commit(self) -> list[Path]:
         """Write every staged output: all to temporary files first, then all renamed over their targets
-        (a failure while writing any leaves every target untouched); returns the paths written."""
+        (a failure while writing any leaves every target untouched; an output left empty, e.g. a figure
+        the library did not draw, does not replace its target); returns the paths written."""
         ready: list[tuple[Path, Path]] = []
         try:
             for option, write in self._staged.items():
@@ -207,10 +208,11 @@ class Outputs:
         except BaseException:
             self.discard(t for t, _ in ready)
             raise
-        for tmp, target in ready:
+        written = [(tmp, target) for tmp, target in ready if tmp.stat().st_size > 0]  # empty: nothing was made
+        for tmp, target in written:
             os.replace(tmp, target)
-        self.discard()
-        return [target for _, target in ready]
+        self.discard(t for t, _ in ready)
+        return [target for _, target in written]
 
     def discard(self, extra: Iterable[Path] = ()) -> None:
         """Remove the temporary files of this run (a failed or refused run writes nothing)."""
