@@ -270,3 +270,13 @@ def test_an_output_the_library_did_not_write_keeps_the_earlier_file(tmp_path):
     assert out.temporary("--plot").is_file()  # handed to a library that, here, never draws
     assert out.commit() == [] and earlier.read_bytes() == b"earlier figure"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.png"]
+
+
+def test_a_refusal_is_one_line_even_after_warnings(monkeypatch, capsys):
+    import warnings
+
+    def noisy(*args, **kwargs):
+        warnings.warn("invalid value encountered in subtract", RuntimeWarning)
+        raise InputError("rec.csv", "current_a", 1e300, "implausible")
+    monkeypatch.setattr("thermo_ddp.studies.demo.hold_demo", noisy)
+    assert refused(["demo"], capsys, "implausible").startswith("thermo-ddp: rec.csv")

@@ -12,6 +12,7 @@ import json
 import logging
 import math
 import sys
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -248,19 +249,23 @@ def main(argv: list[str] | None = None) -> int:
     args = make_parser().parse_intermixed_args(ns.args)
     logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")
     out = Outputs()
-    try:
-        _check_environment()
-        out = _outputs(args)
-        status = run(args, out)
-        written = _commit(out)
-    except InputError as err:
-        print(f"thermo-ddp: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("thermo-ddp: interrupted; nothing written, earlier files unchanged", file=sys.stderr)
-        return 130
-    finally:
-        out.discard()
+    with warnings.catch_warnings(record=True) as caught:  # a refusal prints one line, nothing else
+        warnings.simplefilter("default")
+        try:
+            _check_environment()
+            out = _outputs(args)
+            status = run(args, out)
+            written = _commit(out)
+        except InputError as err:
+            print(f"thermo-ddp: {err}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("thermo-ddp: interrupted; nothing written, earlier files unchanged", file=sys.stderr)
+            return 130
+        finally:
+            out.discard()
+    for w in caught:  # the run went through: its warnings are worth reading
+        log.warning("%s: %s (%s:%d)", w.category.__name__, w.message, w.filename, w.lineno)
     return status if written else 1
 
 
