@@ -1,6 +1,6 @@
 """Fuzz the ``thermo-ddp`` command line with generated bad and odd inputs; count each outcome class.
 
-    python benchmarks/fuzz_cli.py [--cases 1200] [--seed 0] [--timeout-s 120] [--subprocess-sample 40]
+    python benchmarks/fuzz_cli.py [--cases 2000] [--seed 0] [--timeout-s 120] [--subprocess-sample 60] [--kinds 0 1 ...]
 
 Each case is an argument list run in a fresh folder holding its inputs (a thermal and a mechanical
 recording, a parameter file, possibly fuzzed ones) and earlier outputs (JSON, PNG, a run folder of
@@ -326,10 +326,10 @@ def subprocess_code(argv, cwd, timeout_s):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=int, default=1200)
+    parser.add_argument("--cases", type=int, default=2000)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timeout-s", type=float, default=120.0)
-    parser.add_argument("--subprocess-sample", type=int, default=40, help="cases also run as real processes")
+    parser.add_argument("--subprocess-sample", type=int, default=60, help="cases also run as real processes")
     parser.add_argument("--kinds", type=int, nargs="+", default=list(range(10)),
                         help="case kinds to generate (0-9, see make_case; default all, in turn)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
