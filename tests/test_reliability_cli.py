@@ -280,3 +280,12 @@ def test_a_refusal_is_one_line_even_after_warnings(monkeypatch, capsys):
         raise InputError("rec.csv", "current_a", 1e300, "implausible")
     monkeypatch.setattr("thermo_ddp.studies.demo.hold_demo", noisy)
     assert refused(["demo"], capsys, "implausible").startswith("thermo-ddp: rec.csv")
+
+
+@pytest.mark.parametrize("where", [".", ".."])
+def test_loop_out_never_replaces_the_current_folder(where, tmp_path, monkeypatch, capsys, no_work):
+    inner = tmp_path / "empty"
+    inner.mkdir()
+    monkeypatch.chdir(inner)
+    refused(["loop", "--short", "--out", where], capsys, "current folder")
+    assert inner.is_dir() and list(inner.iterdir()) == []

@@ -110,6 +110,9 @@ def check_output_folder(option: str, path: str | Path, inputs: Iterable[str | Pa
     _check_name(option, out)
     if out.exists() and not out.is_dir():
         raise InputError(str(out), option, str(out), "is a file; expected a folder")
+    out = out.resolve()
+    if out == Path.cwd() or out in Path.cwd().parents:
+        raise InputError(str(path), option, str(path), "is the current folder or holds it; name a new folder")
     _check_parent(option, out)
     if out.is_dir() and any(out.iterdir()) and not (out / RUN_MARKER).is_file():
         raise InputError(str(out), option, str(out), "folder is not empty and thermo-ddp did not write it; "
