@@ -1,73 +1,72 @@
-"""The ``thermo-ddp`` command line. Bad input: one line on stderr and exit status 2."""
+"""The ``thermo-ddp`` command line: parse, validate, call, write atomically.
+
+Exit status (docs/architecture.md): 0 the analysis reached a result (an infeasible plan is one);
+1 it ran but failed (``success: false``; the JSON is still written); 2 bad input, one line on stderr,
+before any work. Every output is checked before work (:class:`thermo_ddp.outputs.Outputs`) and
+written only when the run ends.
+"""
 from __future__ import annotations
 
 import argparse
 import json
 import logging
+import math
 import sys
+import warnings
+from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 from .errors import InputError
+from .outputs import Outputs
 from .tasks._common import DEFAULT_HOLD_S
 
+log = logging.getLogger(__name__)
 
-def _demo(args) -> int:
+# Argument names holding input paths, and the output options by argument name: every output is
+# refused when it is also an input (checked before any work, whatever the verb).
+INPUT_ARGS = ("recordings", "model", "columns")
+OUTPUT_ARGS = {"json": "--json", "plot": "--plot", "write_model": "--write-model"}
+FIGURE_OPTIONS = ("--plot",)
+
+
+def _demo(args, out: Outputs) -> int:
     from .studies.demo import hold_demo
     print(hold_demo(args.payload_kg, args.hold_s).report())
     return 0
 
 
-def _plan(args) -> int:
+def _plan(args, out: Outputs) -> int:
     from .tasks.lift import plan_lift
     options = {"solver": args.solver}
     if args.model:
         options["parameter_file"] = args.model
     plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
     print(plan.report())
-    if args.json:
-        _write_json(plan.to_dict(), args.json)
-    if args.plot:
-        plan.plot(args.plot)
-    return 0
+    out.figure("--plot", plan.plot)
+    return _result(plan.to_dict(), out, stdout=False)
 
 
-def _compare(args) -> int:
+def _compare(args, out: Outputs) -> int:
     from .tasks.lift import compare_limits
     limits = tuple(args.limits_c) if args.limits_c else None
     print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver).table())
     return 0
 
 
-def _loop(args) -> int:
+def _loop(args, out: Outputs) -> int:
     from .studies.loop import loop_files
     options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle}
     if args.hold_s is not None:
         options["hold_s"] = args.hold_s
-    loop_files(args.out, short=args.short, **options)
+    table = loop_files(args.out, short=args.short, **options)
     print((Path(args.out) / "loop.txt").read_text(), end="")
     print(f"outputs in {args.out}: loop.json, loop.png, loop_summary.png, diagnosis.json, models/, recordings/")
-    return 0
+    return _exit_status(table)
 
 
-def _sweep(args) -> int:
-    from .outputs import Outputs
-    from .studies.engine import EngineSettings
-    from .studies.sweep import MAX_RUNS, robustness_sweep
-    if not 1 <= args.runs <= MAX_RUNS:
-        raise InputError("--runs", "--runs", args.runs, f"must be in [1, {MAX_RUNS}]")
-    if args.seed < 0:
-        raise InputError("--seed", "--seed", args.seed, "must be >= 0")
-    engine = EngineSettings(scheduler=args.scheduler, workers=args.workers)
-    outputs = Outputs.check({"--json": args.json, "--plot": args.plot})
-    result = robustness_sweep(args.runs, args.seed, args.short, engine)
-    print(result.report())
-    outputs.json("--json", result.to_dict())
-    outputs.figure("--plot", result.plot)
-    outputs.commit()
-    return 0 if result.success else 1
-
-
-def _cache(args) -> int:
+def _cache(args, out: Outputs) -> int:
     from . import codegen
     if args.clear:
         print(f"removed {codegen.clear_cache()} files from {codegen.cache_dir()}")
@@ -76,80 +75,133 @@ def _cache(args) -> int:
     return 0
 
 
-def _write_json(data: dict, path: str | None) -> None:
-    text = json.dumps(data, indent=2)
-    if path is None:
-        print(text)
-        return
-    try:
-        Path(path).write_text(text + "\n")
-    except OSError as err:
-        raise InputError(path, "--json", path, f"cannot write ({err.strerror})") from None
-
-
-def _model_outputs(args):
-    """The run's file outputs, checked before any work (against every input and each other)."""
-    from .outputs import Outputs
-    if args.physics == "mechanical" and (args.model or args.write_model):
-        option = "--model" if args.model else "--write-model"
-        raise InputError(option, option, args.model or args.write_model,
-                         "a motor parameter file belongs to --physics thermal")
-    inputs = [*args.recordings, *(p for p in (args.model, args.columns) if p)]
-    return Outputs.check({"--json": args.json, "--plot": getattr(args, "plot", None),
-                          "--write-model": args.write_model}, inputs)
-
-
-def _write_model(outputs, result: dict) -> None:
-    """Write the identified / improved parameter file (--write-model) when the run produced one."""
-    from .model.parameters import dumps_parameters, parameters_from_dict
-    if not outputs.wanted("--write-model"):
-        return
-    if result.get("parameter_file") is None:
-        logging.getLogger(__name__).warning("no parameter file to write: the fit failed (%s)", result.get("message"))
-        return
-    params = parameters_from_dict(result["parameter_file"], "--write-model")
-    outputs.text("--write-model", dumps_parameters(params))
-    outputs.commit()
-
-
-def _identify(args) -> int:
-    outputs = _model_outputs(args)
+def _identify(args, out: Outputs) -> int:
+    _check_physics_model(args)
     if args.physics == "mechanical":
         from .identify.mechanical import identify_mechanical_files
         result = identify_mechanical_files(args.recordings, columns=args.columns)
     else:
         from .identify.thermal import identify_thermal_files
         result = identify_thermal_files(args.recordings, parameters=args.model, columns=args.columns)
-    _write_json(result, args.json)
-    _write_model(outputs, result)
-    return 0
+    _stage_model(out, result)
+    return _result(result, out)
 
 
-def _diagnose(args) -> int:
-    outputs = _model_outputs(args)
+def _diagnose(args, out: Outputs) -> int:
+    _check_physics_model(args)
     if args.physics == "mechanical":
         from .diagnose.mechanical import diagnose_mechanical_files
-        result = diagnose_mechanical_files(args.recordings, plot=args.plot, columns=args.columns)
+        result = diagnose_mechanical_files(args.recordings, plot=out.temporary("--plot"), columns=args.columns)
     else:
         from .diagnose.thermal import diagnose_thermal_files
-        result = diagnose_thermal_files(args.recordings, plot=args.plot, parameters=args.model, columns=args.columns)
-    _write_json(result, args.json)
-    _write_model(outputs, result)
-    return 0
+        result = diagnose_thermal_files(args.recordings, plot=out.temporary("--plot"), parameters=args.model,
+                                        columns=args.columns)
+    _stage_model(out, result)
+    return _result(result, out)
 
 
-def _validate(args) -> int:
-    from .outputs import Outputs
+def _validate(args, out: Outputs) -> int:
     from .validate import validate_files
-    inputs = [*args.recordings, args.model, *([args.columns] if args.columns else [])]
-    outputs = Outputs.check({"--json": args.json, "--plot": args.plot}, inputs)
     result = validate_files(args.recordings, args.model, args.columns)
     print(result.report())
-    outputs.json("--json", result.to_dict())
     if result.success:
-        outputs.figure("--plot", result.plot)
-    outputs.commit()
-    return 0 if result.success else 1
+        out.figure("--plot", result.plot)
+    return _result(result.to_dict(), out, stdout=False)
+
+
+def _sweep(args, out: Outputs) -> int:
+    from .studies.engine import EngineSettings
+    from .studies.sweep import MAX_RUNS, robustness_sweep
+    if not 1 <= args.runs <= MAX_RUNS:
+        raise InputError("--runs", "--runs", args.runs, f"must be in [1, {MAX_RUNS}]")
+    if args.seed < 0:
+        raise InputError("--seed", "--seed", args.seed, "must be >= 0")
+    result = robustness_sweep(args.runs, args.seed, args.short, EngineSettings(scheduler=args.scheduler,
+                                                                               workers=args.workers))
+    print(result.report())
+    out.figure("--plot", result.plot)
+    return _result(result.to_dict(), out, stdout=False)
+
+
+def _check_physics_model(args) -> None:
+    """A motor parameter file belongs to the thermal physics."""
+    if args.physics == "mechanical" and (args.model or args.write_model):
+        option = "--model" if args.model else "--write-model"
+        raise InputError(option, option, args.model or args.write_model,
+                         "a motor parameter file belongs to --physics thermal")
+
+
+def _stage_model(out: Outputs, result: dict) -> None:
+    """Stage the identified / improved parameter file (--write-model) when the run produced one."""
+    from .model.parameters import dumps_parameters, parameters_from_dict
+    if not out.wanted("--write-model"):
+        return
+    if result.get("parameter_file") is None:
+        log.warning("no parameter file to write: the fit failed (%s)", result.get("message"))
+        return
+    out.text("--write-model", dumps_parameters(parameters_from_dict(result["parameter_file"], "--write-model")))
+
+
+# --------------------------------------------------------------------------------------------
+# Results: JSON-ready, never NaN, the exit status from ``success``
+# --------------------------------------------------------------------------------------------
+def _exit_status(data: dict) -> int:
+    """1 when the result says it ran but failed (``success: false``), else 0."""
+    return 1 if data.get("success") is False else 0
+
+
+def _plain(value, where: str, bad: list[str]):
+    """``value`` with numpy types as Python ones and non-finite numbers as None (their paths in ``bad``)."""
+    if isinstance(value, dict):
+        return {k: _plain(v, f"{where}.{k}", bad) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v, f"{where}[{i}]", bad) for i, v in enumerate(value)]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        bad.append(where)
+        return None
+    return value
+
+
+def _result(data: dict, out: Outputs, stdout: bool = True) -> int:
+    """Stage the result JSON for ``--json`` (or print it when ``stdout`` and no file was asked for);
+    a result holding NaN or inf is not a result: it is marked failed (exit 1), never passed on."""
+    bad: list[str] = []
+    data = _plain(data, "", bad)
+    if bad:
+        log.warning("non-finite numbers in the result at %s", ", ".join(bad[:5]))
+        data |= {"success": False, "status": "non_finite_result",
+                 "message": f"the result holds non-finite numbers (first at {bad[0].lstrip('.')}); not trustworthy"}
+    if out.wanted("--json"):
+        out.json("--json", data)
+    elif stdout:
+        print(json.dumps(data, indent=2))
+    return _exit_status(data)
+
+
+def _outputs(args) -> Outputs:
+    """Every output of ``args`` checked against every input (the packaged parameter files included: the
+    default models) and each other, before any work."""
+    inputs = sorted(Path(str(resources.files("thermo_ddp").joinpath("models"))).glob("*.toml"))  # default models
+    for name in INPUT_ARGS:
+        value = getattr(args, name, None)
+        inputs += list(value) if isinstance(value, (list, tuple)) else [value] if value else []
+    wanted = {option: getattr(args, name, None) for name, option in OUTPUT_ARGS.items()}
+    return Outputs.check(wanted, inputs, FIGURE_OPTIONS)
+
+
+def _number(unit: str):
+    """An argparse ``type``: a finite number (the unit named in the message)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number in {unit}, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected a finite number in {unit}, got {text!r}")
+        return value
+    return parse
 
 
 class _Parser(argparse.ArgumentParser):
@@ -184,26 +236,26 @@ def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
 def _demo_parser() -> _Parser:
     demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
                                                        "current and winding heating")
-    demo.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    demo.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S, help="duration of the hold, s (default %(default)s)")
+    demo.add_argument("--payload-kg", type=_number("kg"), default=40.0, help="payload at the gripper, kg (default %(default)s)")
+    demo.add_argument("--hold-s", type=_number("s"), default=DEFAULT_HOLD_S, help="duration of the hold, s (default %(default)s)")
     return demo
 
 
 def _plan_parser(name: str, description: str) -> _Parser:
     cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("--payload-kg", type=float, default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    cmd.add_argument("--hold-s", type=float, default=DEFAULT_HOLD_S, help="requested hold at the goal, s (default %(default)s)")
+    cmd.add_argument("--payload-kg", type=_number("kg"), default=40.0, help="payload at the gripper, kg (default %(default)s)")
+    cmd.add_argument("--hold-s", type=_number("s"), default=DEFAULT_HOLD_S, help="requested hold at the goal, s (default %(default)s)")
     cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
                      help="solver of the transcribed problem (default %(default)s)")
     if name == "plan":
-        cmd.add_argument("--limit-c", type=float, default=None,
+        cmd.add_argument("--limit-c", type=_number("°C"), default=None,
                          help="winding limit, °C (default: the model file's [limits] safety_cutoff_c, 84 for the elbow)")
         cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default: the packaged "
                                                          "models/arm_left_4_joint.toml)")
         cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
         cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
     else:
-        cmd.add_argument("--limits-c", type=float, nargs="+", default=None,
+        cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=None,
                          help="winding limits to compare, °C (default: the elbow file's safety_cutoff_c and "
                               "winding_max_c, 84 and 140)")
     return cmd
@@ -214,9 +266,9 @@ def _loop_parser() -> _Parser:
                   "model -> plan -> closed loop, original vs improved model, on the simulated elbow")
     cmd.add_argument("--out", default="loop_out", help="output folder (default %(default)s)")
     cmd.add_argument("--short", action="store_true", help="flag: 30-minute experiments and a 45 s hold")
-    cmd.add_argument("--hold-s", type=float, default=None,
+    cmd.add_argument("--hold-s", type=_number("s"), default=None,
                      help="requested hold at the goal, s (default: LoopSettings.hold_s; --short shortens it)")
-    cmd.add_argument("--limits-c", type=float, nargs="+", default=[84.0, 140.0],
+    cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=[84.0, 140.0],
                      help="winding limits, °C (default %(default)s)")
     cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters")
     return cmd
@@ -277,11 +329,45 @@ def main(argv: list[str] | None = None) -> int:
     make_parser, run = COMMANDS[ns.command]
     args = make_parser().parse_intermixed_args(ns.args)
     logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")
+    out = Outputs()
+    with warnings.catch_warnings(record=True) as caught:  # a refusal prints one line, nothing else
+        warnings.simplefilter("default")
+        try:
+            _check_environment()
+            out = _outputs(args)
+            status = run(args, out)
+            written = _commit(out)
+        except InputError as err:
+            print(f"thermo-ddp: {err}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("thermo-ddp: interrupted; nothing written, earlier files unchanged", file=sys.stderr)
+            return 130
+        finally:
+            out.discard()
+    for w in caught:  # the run went through: its warnings are worth reading
+        log.warning("%s: %s (%s:%d)", w.category.__name__, w.message, w.filename, w.lineno)
+    return status if written else 1
+
+
+def _check_environment() -> None:
+    """The compiled-library cache settings ($THERMO_DDP_CACHE, $THERMO_DDP_CACHE_MAX_MB), before work."""
+    from .codegen import cache_dir, cache_max_bytes
+    folder = cache_dir()
+    if folder.exists() and not folder.is_dir():
+        raise InputError("environment", "THERMO_DDP_CACHE", str(folder), "is a file; expected a folder")
+    cache_max_bytes()
+
+
+def _commit(out: Outputs) -> bool:
+    """Write the staged outputs; False (one line on stderr, nothing replaced) when the system refuses."""
     try:
-        return run(args)
-    except InputError as err:
-        print(f"thermo-ddp: {err}", file=sys.stderr)
-        return 2
+        out.commit()
+    except OSError as err:
+        print(f"thermo-ddp: cannot write the outputs ({err.strerror or err}); earlier files are unchanged",
+              file=sys.stderr)
+        return False
+    return True
 
 
 if __name__ == "__main__":

@@ -88,6 +88,9 @@ def joint_kinematics(recording: Recording, settings: MechanicalSettings | None =
     """Zero-phase low-pass of ``position``, central-difference ``velocity``/``acceleration``, trimmed ends."""
     settings = settings or MechanicalSettings()
     recording.require("position", "effort")
+    if len(recording) < 3:  # no sample period to filter with
+        raise InputError(recording.source or recording.name, "time_s", f"{len(recording)} samples",
+                         "too short to filter and differentiate")
     rec = _uniform(recording)
     dt = float(np.median(np.diff(rec.time_s)))
     nyquist = 0.5 / dt

@@ -293,7 +293,7 @@ class ThermalFit(FitResult):
         for key, err in self.stderr.items():
             value = self.parameters[key]
             if _SEARCH[key][0] == "log" and value > 0:
-                factor = math.exp(Z95 * err / value)
+                factor = math.exp(min(Z95 * err / value, 700.0))  # no OverflowError: ~1e304, beyond any bound
                 out[key] = (value / factor, value * factor)
             else:
                 out[key] = (value - Z95 * err, value + Z95 * err)

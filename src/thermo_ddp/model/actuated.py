@@ -18,9 +18,32 @@ from . import motor
 from .arm import Arm, ArmSettings, build_arm
 from ..errors import InputError
 from .integrators import make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
-from .parameters import JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict
+from .parameters import BOUNDS, Bound, JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict
 from .rigid_body import RigidBodyDynamics
 from .thermal import ThermalNetwork, joint_heat_rhs, network_from_parameters
+
+_SRC = "model"
+STEP_S = Bound(1e-6, 10.0, "s", "an integration step: microseconds to seconds")
+MAX_STEPS = 2_000_000  # steps of one simulation: its states take nx * 8 bytes each
+
+
+def check_integrator(source: str, integrator: str) -> str:
+    """``integrator`` is rk4, rk4_<sub-steps> or implicit_euler; InputError otherwise."""
+    ok = isinstance(integrator, str) and (integrator == "implicit_euler" or rk4_substeps(integrator) is not None)
+    if not ok:
+        raise InputError(source, "integrator", integrator, "choose rk4, rk4_<sub-steps> or implicit_euler")
+    return integrator
+
+
+def _finite_array(name: str, value, shape_text: str) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(_SRC, name, repr(value)[:60], f"expected numbers, {shape_text}") from None
+    if not np.all(np.isfinite(a)):
+        raise InputError(_SRC, name, "non-finite values", f"expected finite numbers, {shape_text}")
+    return a
+
 
 @dataclass(frozen=True)
 class ActuatedArm:
@@ -107,40 +130,69 @@ class ActuatedArm:
     def state(self, q=None, v=None, temperatures_c=None) -> np.ndarray:
         """A state vector; defaults: q = 0 (arm hanging), v = 0, the idle temperatures."""
         n = self.nu
-        q = np.zeros(n) if q is None else np.asarray(q, float)
-        v = np.zeros(n) if v is None else np.asarray(v, float)
-        t = self.idle_temperatures() if temperatures_c is None else np.asarray(temperatures_c, float)
+        q = np.zeros(n) if q is None else self._vector("q", q, n, "rad")
+        v = np.zeros(n) if v is None else self._vector("v", v, n, "rad/s")
+        nt = self.nx - 2 * n
+        t = self.idle_temperatures() if temperatures_c is None else self._vector("temperatures_c", temperatures_c, nt, "°C")
         return np.concatenate([q, v, t])
+
+    @staticmethod
+    def _vector(name: str, value, size: int, unit: str) -> np.ndarray:
+        """``value`` as ``size`` finite numbers (InputError naming ``name``, the shape and the unit)."""
+        a = _finite_array(name, value, f"shape ({size},) in {unit}").reshape(-1)
+        if a.size != size:
+            raise InputError(_SRC, name, f"{a.size} values", f"expected {size} (one per joint or node) in {unit}")
+        return a
 
     # --- functions --------------------------------------------------------------------
     def step(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
         """Named ``step(x, current_a, ambient_c) -> x_next``."""
-        return make_step(self.ode, dt_s, integrator)
+        dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
+        return make_step(self.ode, dt_s, check_integrator(_SRC, integrator))
 
     def step_jacobians(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
         """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)``."""
-        substeps = rk4_substeps(integrator)
+        dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
+        substeps = rk4_substeps(check_integrator(_SRC, integrator))
         if substeps is not None:
             return rk4_step_jacobians(self.ode_jacobians, dt_s, substeps)
         return step_jacobians(self.step(dt_s, integrator))
 
     def static_current_a(self, q) -> np.ndarray:
         """Currents that hold posture ``q`` at rest (gravity only; friction is zero at v = 0)."""
-        g = self.arm.gravity_torque_nm(q)
+        g = self.arm.gravity_torque_nm(self._vector("q", q, self.nu, "rad"))
         return np.array([float(motor.current_for_torque_a(self.params[j].motor, g[k]))
                          for k, j in enumerate(self.joints)])
 
     def simulate(self, x0, current_a, dt_s: float, integrator: str = "rk4", ambient_c=None) -> "Trajectory":
         """Plant simulation with zero-order-hold currents ``current_a`` of shape (N, nu)."""
-        u = np.atleast_2d(np.asarray(current_a, float))
-        if u.shape[1] != self.nu:
-            u = u.reshape(-1, self.nu)
+        x0, u, amb = self._simulation_inputs(x0, current_a, ambient_c)
         n = u.shape[0]
-        amb = np.full(n, self.ambient_c if ambient_c is None else ambient_c, dtype=float)
         sim = self.step(dt_s, integrator).mapaccum(n)
-        xs = np.array(sim(np.asarray(x0, float), u.T, amb.reshape(1, -1))).T
-        xs = np.vstack([np.asarray(x0, float), xs])
-        return Trajectory(self, np.arange(n + 1) * dt_s, xs, u, amb)
+        xs = np.vstack([x0, np.array(sim(x0, u.T, amb.reshape(1, -1))).T])
+        return Trajectory(self, np.arange(n + 1) * float(dt_s), xs, u, amb)
+
+    def _simulation_inputs(self, x0, current_a, ambient_c) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x0 (nx,), currents (N, nu) and ambient (N,), checked: finite, shaped, N in 1..MAX_STEPS.
+        Currents may be (N,) for one joint, or (nu,) for one step."""
+        x0 = _finite_array("x0", x0, f"shape ({self.nx},)")
+        if x0.shape != (self.nx,):
+            raise InputError(_SRC, "x0", f"shape {x0.shape}", f"expected shape ({self.nx},): {', '.join(self.state_names)}")
+        u = _finite_array("current_a", current_a, f"shape (N, {self.nu}) in A")
+        if u.ndim == 1 and (self.nu == 1 or u.size == self.nu):
+            u = u.reshape(-1, self.nu)
+        if u.ndim != 2 or u.shape[1] != self.nu or not 1 <= u.shape[0] <= MAX_STEPS:
+            raise InputError(_SRC, "current_a", f"shape {u.shape}",
+                             f"expected shape (N, {self.nu}) with 1 <= N <= {MAX_STEPS} steps (memory)")
+        n = u.shape[0]
+        if ambient_c is None:
+            return x0, u, np.full(n, self.ambient_c)
+        amb = _finite_array("ambient_c", ambient_c, f"a number or shape ({n},) in °C")
+        if amb.shape not in ((), (n,)):
+            raise InputError(_SRC, "ambient_c", f"shape {amb.shape}", f"expected a number or shape ({n},) in °C")
+        for value in np.unique(amb):
+            BOUNDS["ambient_c"].check(_SRC, "ambient_c", value)
+        return x0, u, np.broadcast_to(amb, (n,)).astype(float)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import InputError
+from .parameters import Bound
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +27,9 @@ ELBOW = "arm_left_4_joint"
 WRIST = "arm_left_7_joint"  # joints 5-7 share one origin, the wrist centre
 GRIPPER_FRAME = "gripper_left_base_link"
 GRIPPER_LEVER_M = 0.357  # elbow axis to gripper_left_base_link in talos_reduced.urdf: 0.3573 m
+# Payload at the gripper: Talos itself weighs about 100 kg (PAL Robotics datasheet: 95 kg); no arm lifts more.
+PAYLOAD_KG = Bound(0.0, 100.0, "kg", "Talos itself weighs about 100 kg; no arm of it lifts more")
+PAYLOAD_LEVER_M = Bound(0.0, 0.6, "m", "from the elbow axis along the forearm, the gripper at 0.357 m")
 
 
 def robots_dir() -> Path:
@@ -60,10 +64,9 @@ class ArmSettings:
         for j in self.joints:
             if j not in LEFT_ARM:
                 raise InputError("arm", "joints", j, f"not a left-arm joint; choose from {', '.join(LEFT_ARM)}")
-        if self.payload_kg < 0 or not np.isfinite(self.payload_kg):
-            raise InputError("arm", "payload_kg", self.payload_kg, "must be >= 0")
-        if not 0 <= self.payload_lever_m <= 0.6:
-            raise InputError("arm", "payload_lever_m", self.payload_lever_m, "must be within [0, 0.6] m")
+        object.__setattr__(self, "payload_kg", PAYLOAD_KG.check("arm", "payload_kg", self.payload_kg, "out of range"))
+        object.__setattr__(self, "payload_lever_m",
+                           PAYLOAD_LEVER_M.check("arm", "payload_lever_m", self.payload_lever_m, "out of range"))
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
 import tomli_w
 
 from ..errors import InputError
@@ -30,6 +32,19 @@ class Bound:
     high: float
     unit: str
     reason: str
+
+    def check(self, source: str, name: str, value: Any, what: str = "physically impossible") -> float:
+        """``value`` as a finite float of the right sign within the bound (numpy scalars accepted);
+        InputError naming ``source``, ``name``, the value, the range, its unit and ``reason`` otherwise."""
+        x = _number(source, name, value)
+        unit = f" {self.unit}" if self.unit else ""
+        if self.low > 0 and x <= 0:
+            raise InputError(source, name, x, f"must be > 0{unit}")
+        if self.low == 0 and x < 0:
+            raise InputError(source, name, x, f"must be >= 0{unit}")
+        if not self.low <= x <= self.high:
+            raise InputError(source, name, x, f"{what}: expected {self.low:g} to {self.high:g}{unit} ({self.reason})")
+        return x
 
 
 _RESISTANCE_K_PER_W = Bound(1e-4, 1e4, "K/W", "a liquid-cooled housing ~0.01, a tiny part in still air ~1000")
@@ -202,7 +217,7 @@ class JointParameters:
 
 
 def _number(source: str, key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise InputError(source, key, repr(value), "expected a number in the SI unit named by the key")
     value = float(value)
     if not math.isfinite(value):
@@ -213,16 +228,7 @@ def _number(source: str, key: str, value: Any) -> float:
 def checked_value(source: str, name: str, key: str, value: Any) -> float:
     """``value`` of catalogue ``key`` (shown as ``name``) as a finite number of the right sign within
     the key's :data:`BOUNDS`; InputError otherwise."""
-    x = _number(source, name, value)
-    b = BOUNDS[key]
-    if b.low > 0 and x <= 0:
-        raise InputError(source, name, x, "must be > 0")
-    if b.low == 0 and x < 0:
-        raise InputError(source, name, x, "must be >= 0")
-    if not b.low <= x <= b.high:
-        unit = f" {b.unit}" if b.unit else ""
-        raise InputError(source, name, x, f"physically impossible: expected {b.low:g} to {b.high:g}{unit} ({b.reason})")
-    return x
+    return BOUNDS[key].check(source, name, value)
 
 
 def _above_ambient(source: str, key: str, value: float, ambient_c: float) -> None:
@@ -291,8 +297,11 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
     for key in LIMIT_KEYS:
         _above_ambient(source, f"limits.{key}", getattr(limits, key), thermal.ambient_c)
     sources = data.get("sources", {})
-    if not isinstance(sources, Mapping) or not all(isinstance(v, str) for v in sources.values()):
+    if not isinstance(sources, Mapping):
         raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
+    for key, text in sources.items():
+        if not isinstance(text, str):
+            raise InputError(source, f"sources.{key}", repr(text), "expected \"free text\": where the value comes from")
     return JointParameters(joint, motor, thermal, limits, dict(sources), source)
 
 
@@ -312,6 +321,8 @@ def load_parameters(path: str | Path) -> JointParameters:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise InputError(str(path), "file", str(path), "no such parameter file") from None
+    except (OSError, UnicodeDecodeError) as exc:  # a folder, no permission, a binary file
+        raise InputError(str(path), "file", str(path), f"cannot read a parameter file ({exc})") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(str(path), "TOML", "<file>", f"not valid TOML ({exc})") from None
     return parameters_from_dict(data, str(path))

@@ -40,10 +40,11 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require, settings_from_mapping
-from ..model.actuated import ActuatedArm
-from ..model.arm import ELBOW, ArmSettings
+from ..model.actuated import ActuatedArm, load_model
+from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
+from ..tasks._common import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
@@ -52,6 +53,7 @@ from .testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, Simulat
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
 from .._figures import new_figure
+from ..outputs import check_output_folder, write_folder_atomically
 
 log = logging.getLogger(__name__)
 _SRC = "loop"
@@ -91,8 +93,11 @@ class LoopSettings:
     progress: bool | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "limits_c", tuple(float(v) for v in self.limits_c))
-        require(len(self.limits_c) > 0, _SRC, "limits_c", self.limits_c, "give at least one winding limit")
+        require(0 < len(self.limits_c) <= MAX_LIMITS, _SRC, "limits_c", self.limits_c,
+                f"give 1 to {MAX_LIMITS} winding limits (each is a plan and a closed loop per model)")
+        elbow = load_parameters(packaged_parameter_file(ELBOW))  # every limit checked before the experiments
+        object.__setattr__(self, "limits_c", tuple(joint_limit_c(elbow, check_limit_c(_SRC, v)) for v in self.limits_c))
+        check_fields(self, _SRC, {"payload_kg": PAYLOAD_KG, "hold_s": HOLD_S})
         for name in ("payload_kg", "hold_s", "heating_s", "cooling_s"):
             value = getattr(self, name)
             require(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, _SRC, name, value,
@@ -461,6 +466,9 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     if out_dir is None:
         out_dir = Path(tempfile.mkdtemp(prefix="thermo-ddp-loop-"))
     out_dir = Path(out_dir)
+    elbow = load_model((ELBOW,))  # a limit the resting winding already exceeds is refused before the experiments
+    for lim in settings.limits_c:
+        check_idle_below_limits(elbow, {ELBOW: lim})
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
     recordings = record_experiments(robot, settings)
@@ -487,17 +495,30 @@ def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[s
     """CLI entry (``thermo-ddp loop``): run the chain, write into ``out_dir`` the recordings
     (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth),
     the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png), the table (loop.json)
-    and the report (loop.txt); return the table."""
-    out_dir = Path(out_dir)
+    and the report (loop.txt); return the table.
+
+    ``out_dir`` is checked before any work (new, empty, or an earlier run's folder: see
+    :func:`thermo_ddp.outputs.check_output_folder`); the run is built in a fresh folder beside it that
+    replaces it only when complete, so a failed run leaves an earlier one as it was."""
     settings = LoopSettings.short(**options) if short else settings_from_mapping(LoopSettings, options, _SRC)
-    result = run_loop(settings, out_dir)
-    (out_dir / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
-    result.diagnosis.plot(out_dir / "diagnosis.png")
-    result.plot(out_dir / "loop.png")
-    result.plot_summary(out_dir / "loop_summary.png")
+    out_dir = check_output_folder("--out", out_dir)
+    return write_folder_atomically(out_dir, lambda folder: _write_loop(settings, folder, out_dir))
+
+
+def _write_loop(settings: LoopSettings, folder: Path, final: Path) -> dict[str, Any]:
+    """The run's files into ``folder``; paths in the table name ``final``, where the folder will be."""
+    result = run_loop(settings, folder)
+    (folder / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
+    result.diagnosis.plot(folder / "diagnosis.png")
+    result.plot(folder / "loop.png")
+    result.plot_summary(folder / "loop_summary.png")
     table = result.to_dict()
-    (out_dir / "loop.json").write_text(json.dumps(table, indent=1))
-    (out_dir / "loop.txt").write_text(result.report() + "\n")
+    def moved(path: str) -> str:
+        return str(final / Path(path).relative_to(folder))
+    table["recordings"] = [moved(p) for p in table["recordings"]]
+    table["model_files"] = {k: moved(p) for k, p in table["model_files"].items()}
+    (folder / "loop.json").write_text(json.dumps(table, indent=1))
+    (folder / "loop.txt").write_text(result.report() + "\n")
     return table
 
 

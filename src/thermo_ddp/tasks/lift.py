@@ -27,15 +27,15 @@ import numpy as np
 
 from .._config import require, settings_from_mapping
 from ..model import motor
-from ..model.actuated import ActuatedArm, load_model
-from ..model.arm import ELBOW
-from ..model.integrators import rk4_substeps
-from ..model.parameters import load_parameters, packaged_parameter_file
+from ..model.actuated import ActuatedArm, check_integrator, load_model
+from ..model.arm import ELBOW, PAYLOAD_KG
+from ..model.parameters import Bound, load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
-from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c,
-                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_constraints, joint_range_rad,
-                      limit_pair_c, MotionQuality, solver_summary, stop_approach, winding_limits_c)
+from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
+                      check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
+                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
+                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach, winding_limits_c)
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,23 @@ DDP_OPTIONS = DDPSettings(full_second_order=True, inner_tolerance_init=0.1, inne
                           inner_max_iterations=20, reg_decrease=10.0 ** 0.5, pivot_jump=True)
 DEFAULT_OPTIONS = {"ddp": DDP_OPTIONS}
 _SRC = "plan_lift"
+_PHASE_S = Bound(1e-3, 600.0, "s", "a lift or lowering phase: seconds, not hours")
+_WEIGHT = Bound(0.0, 1e9, "", "a cost weight")
+# Every number of LiftSettings and its range (the joint range of the angles is checked on the model).
+SETTING_BOUNDS = {
+    "payload_kg": PAYLOAD_KG, "hold_s": HOLD_S, "lift_s": _PHASE_S, "lower_s": _PHASE_S,
+    "settle_s": Bound(0.0, 600.0, "s", "a rest at the end: seconds, not hours"),
+    "dt_s": Bound(1e-3, 0.5, "s", "the control step; RK4 sub-steps must resolve the arm's fast modes"),
+    "goal_rad": Bound(-2 * math.pi, 2 * math.pi, "rad", "a joint angle"),
+    "start_rad": Bound(-2 * math.pi, 2 * math.pi, "rad", "a joint angle"),
+    "hold_tolerance_rad": Bound(1e-6, 0.5, "rad", "a band around the goal"),
+    "tracking_weight": Bound(1e-9, 1e9, "", "a cost weight, > 0: the lift must track its reference"),
+    "energy_weight": _WEIGHT, "velocity_weight": _WEIGHT, "acceleration_weight": _WEIGHT,
+    "stop_speed_rad_s": Bound(1e-3, 100.0, "rad/s", "the speed allowed at a joint stop, > 0"),
+    "stop_slope_per_s": Bound(0.0, 1e3, "1/s", "how fast the speed allowed grows away from a stop"),
+    "one_way_tolerance_rad_s": Bound(1e-6, 1.0, "rad/s", "a speed small enough to count as still"),
+}
+_VELOCITY_LIMIT = Bound(1e-3, 100.0, "rad/s", "a joint speed limit, > 0 (None: the URDF's)")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,19 +107,15 @@ class LiftSettings:
     find_longest_hold: bool = True
 
     def __post_init__(self):
-        require(self.payload_kg >= 0, _SRC, "payload_kg", self.payload_kg, "must be >= 0")
-        check_limit_c(_SRC, self.limit_c)
-        for name in ("hold_s", "settle_s"):
-            require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
-        for name in ("acceleration_weight", "stop_slope_per_s"):
-            require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
-        for name in ("lift_s", "lower_s", "dt_s", "hold_tolerance_rad", "tracking_weight", "stop_speed_rad_s",
-                     "one_way_tolerance_rad_s"):
-            require(getattr(self, name) > 0, _SRC, name, getattr(self, name), "must be > 0")
-        require(isinstance(self.careful_motion, bool), _SRC, "careful_motion", self.careful_motion, "expected True or False")
+        check_fields(self, _SRC, SETTING_BOUNDS)
+        object.__setattr__(self, "limit_c", check_limit_c(_SRC, self.limit_c))
+        if self.velocity_limit_rad_s is not None:
+            check_fields(self, _SRC, {"velocity_limit_rad_s": _VELOCITY_LIMIT})
+        check_knots(_SRC, sum(self.knots().values()), self.dt_s)
+        require(isinstance(self.careful_motion, bool), _SRC, "careful_motion", self.careful_motion,
+                "expected True or False")
         require(self.solver in SOLVERS, _SRC, "solver", self.solver, f"choose one of {', '.join(SOLVERS)}")
-        require(self.integrator == "implicit_euler" or rk4_substeps(self.integrator) is not None, _SRC,
-                "integrator", self.integrator, "choose rk4, rk4_<sub-steps> or implicit_euler")
+        check_integrator(_SRC, self.integrator)
 
     def knots(self) -> dict[str, int]:
         return {name: int(round(dur / self.dt_s)) for name, dur in
@@ -168,7 +181,9 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     jac = model.step_jacobians(settings.dt_s, settings.integrator)
     dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
-    vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])
+    vmax = settings.velocity_limit_rad_s
+    if vmax is None:
+        vmax = float(model.arm.model.velocityLimit[0])
     tol, goal, start = settings.hold_tolerance_rad, settings.goal_rad, settings.start_rad
 
     def stage(name, expr, out="r"):
@@ -213,7 +228,11 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
-    settings = dataclasses.replace(settings, limit_c=winding_limits_c(model, settings.limit_c)[model.joints[0]])
+    limits = winding_limits_c(model, settings.limit_c)
+    check_idle_below_limits(model, limits)
+    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]])
+    for name in ("start_rad", "goal_rad"):
+        check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
     dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
     problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons, u_lb=[-peak], u_ub=[peak],
@@ -429,6 +448,10 @@ def compare_limits(payload_kg: float = 40.0, limits_c=None, hold_s: float = DEFA
                    **options) -> LimitComparison:
     """:func:`plan_lift` under each winding limit; by default the elbow file's cut-off and short-term
     winding limit (:func:`thermo_ddp.tasks._common.limit_pair_c`: 84 °C and 140 °C)."""
-    if limits_c is None:
-        limits_c = limit_pair_c(load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW)))
+    params = load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW))
+    limits_c = limit_pair_c(params) if limits_c is None else tuple(limits_c)
+    require(0 < len(limits_c) <= MAX_LIMITS, _SRC, "limits_c", limits_c,
+            f"give 1 to {MAX_LIMITS} winding limits (each is a complete plan)")
+    for lim in limits_c:  # every limit checked before the first plan
+        joint_limit_c(params, check_limit_c(_SRC, lim))
     return LimitComparison(tuple(plan_lift(payload_kg, lim, hold_s, **options) for lim in limits_c))

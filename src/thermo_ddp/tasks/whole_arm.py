@@ -27,12 +27,15 @@ import numpy as np
 from .._config import require, settings_from_mapping
 from ..model import motor
 from ..model.actuated import ActuatedArm, load_model
-from ..model.arm import ELBOW, LEFT_ARM
+from ..model.arm import ELBOW, LEFT_ARM, PAYLOAD_KG
+from ..model.parameters import Bound
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, WarmStart
-from ._common import (DEFAULT_HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_limit_c, finite_or_none,
+from ._common import (DEFAULT_HOLD_S, HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_fields,
+                      check_knots, check_limit_c, finite_or_none,
                       format_s, initial_guess, is_feasible, joint_limit_constraints, limiting_joint, solver_summary,
                       time_to_limit_by_joint, violated_constraints, winding_limits_c)
+from .lift import SETTING_BOUNDS as LIFT_BOUNDS
 from .lift import min_jerk
 from .posture import (PostureChoice, evaluate_posture, hanging_posture, naive_posture, optimal_posture,
                       payload_point_function)
@@ -40,6 +43,14 @@ from .posture import (PostureChoice, evaluate_posture, hanging_posture, naive_po
 log = logging.getLogger(__name__)
 _SRC = "plan_whole_arm"
 RK4_STABLE = 2.0          # |lambda| dt kept below this (RK4's real-axis limit is 2.785)
+_POSITIVE_HOLD_S = Bound(1e-3, HOLD_S.high, HOLD_S.unit, HOLD_S.reason)
+SETTING_BOUNDS = {  # every number of WholeArmSettings and its range
+    "payload_kg": PAYLOAD_KG, "hold_s": _POSITIVE_HOLD_S, "posture_hold_s": _POSITIVE_HOLD_S,
+    "move_s": LIFT_BOUNDS["lift_s"], "tracking_weight": LIFT_BOUNDS["tracking_weight"],
+    "energy_weight": LIFT_BOUNDS["energy_weight"], "velocity_weight": LIFT_BOUNDS["velocity_weight"],
+    "target_tolerance_m": Bound(1e-6, 1.0, "m", "a band around the payload point"),
+    "range_margin_rad": Bound(0.0, 0.5, "rad", "kept inside each joint's range"),
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,15 +90,13 @@ class WholeArmSettings:
         object.__setattr__(self, "joints", tuple(self.joints))
         require(ELBOW in self.joints, _SRC, "joints", list(self.joints),
                 f"the payload hangs on the forearm: include {ELBOW}")
-        require(self.payload_kg >= 0, _SRC, "payload_kg", self.payload_kg, "must be >= 0")
-        check_limit_c(_SRC, self.limit_c)
-        for name in ("hold_s", "move_s", "posture_hold_s", "target_tolerance_m", "tracking_weight"):
-            require(getattr(self, name) > 0, _SRC, name, getattr(self, name), "must be > 0")
-        for name in ("range_margin_rad", "energy_weight", "velocity_weight"):
-            require(getattr(self, name) >= 0, _SRC, name, getattr(self, name), "must be >= 0")
+        check_fields(self, _SRC, SETTING_BOUNDS)
+        object.__setattr__(self, "limit_c", check_limit_c(_SRC, self.limit_c))
         require(self.posture_choice in ("optimal", "naive"), _SRC, "posture_choice", self.posture_choice,
                 "choose optimal or naive")
-        require(self.dt_s is None or self.dt_s > 0, _SRC, "dt_s", self.dt_s, "must be > 0 (or None: automatic)")
+        if self.dt_s is not None:
+            check_fields(self, _SRC, {"dt_s": LIFT_BOUNDS["dt_s"]})
+            check_knots(_SRC, round((self.move_s + self.hold_s) / self.dt_s), self.dt_s)
         for name in ("gauss_newton_iterations", "max_iterations"):
             v = getattr(self, name)
             require(isinstance(v, int) and v >= 0, _SRC, name, v, "expected an integer >= 0")
@@ -183,6 +192,7 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
              Constraint("terminal_hold_band", _terminal("terminal_hold_band", x, p, band, "g")))
     peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
     move, hold = int(round(s.move_s / dt_s)), int(round(s.hold_s / dt_s))
+    check_knots(_SRC, move + hold, dt_s)
     problem = OptimalControlProblem(dyn, move + hold, costs, tcosts, cons, tcons, u_lb=-peak, u_ub=peak,
                                     name=f"whole_arm_{n}", dynamics_jacobians=dyn_jac, parameters=layout)
     start = hanging_posture(model, s.range_margin_rad)
