@@ -99,20 +99,48 @@ def test_cli_sweep_bad_input_is_one_line_exit_2(argv, field, tmp_path, capsys):
     assert not (tmp_path / "s.json").exists()
 
 
-def test_fleet_diagnosis_on_the_cluster_equals_one_by_one(tmp_path):
-    from thermo_ddp.studies.fleet import diagnose_fleet, diagnose_one
+@pytest.fixture(scope="module")
+def fleet_csvs(tmp_path_factory):
+    """Two robots' recordings: one whose drive heats the motor (concealed from the model), one without."""
     from thermo_ddp.studies.testbed import PlantParameters, static_3a
 
+    folder = tmp_path_factory.mktemp("fleet")
     paths = []
     for name, effects in (("robot_a", "drive"), ("robot_b", "none")):
         rec = static_3a(params=PlantParameters().with_effects(effects), heating_s=1800.0, cooling_s=1800.0)
-        paths.append(str(tmp_path / f"{name}.csv"))
+        paths.append(str(folder / f"{name}.csv"))
         rec.to_csv(paths[-1])
-    fleet = diagnose_fleet(paths, engine=EngineSettings(workers=2), progress=False)
-    assert fleet.engine["workers"] == 2 and fleet.recordings == tuple(paths)
-    for path, d in zip(paths, fleet.diagnoses):
+    return paths
+
+
+def test_fleet_diagnosis_on_the_cluster_equals_one_by_one(fleet_csvs):
+    from thermo_ddp.studies.fleet import diagnose_fleet, diagnose_one
+
+    fleet = diagnose_fleet(fleet_csvs, engine=EngineSettings(workers=2), progress=False)
+    assert fleet.engine["workers"] == 2 and fleet.recordings == tuple(fleet_csvs)
+    for path, d in zip(fleet_csvs, fleet.diagnoses):
         alone = diagnose_one(path)
         assert [t["term"] for t in d["missing_physics"]] == [t["term"] for t in alone["missing_physics"]]
         assert d["final"]["rmse"] == alone["final"]["rmse"]
-    assert fleet.terms().get("drive_heating") == [paths[0]]   # the drive-heated robot, only
+    assert fleet.terms().get("drive_heating") == [fleet_csvs[0]]   # the drive-heated robot, only
     assert "robot_a.csv" in fleet.report() and fleet.to_dict()["summary"]["terms"] == fleet.terms()
+
+
+def test_cli_diagnose_each_writes_one_diagnosis_per_recording(fleet_csvs, tmp_path, capsys):
+    out = tmp_path / "fleet.json"
+    code = main(["diagnose", *fleet_csvs, "--each", "--workers", "1", "--json", str(out)])
+    data = json.loads(out.read_text())
+    assert code == (0 if data["success"] else 1)
+    assert [d["recording"] for d in data["diagnoses"]] == fleet_csvs
+    assert data["summary"]["terms"].get("drive_heating") == [fleet_csvs[0]]
+    assert "robot_b.csv" in capsys.readouterr().out
+
+
+def test_cli_diagnose_each_checks_every_recording_before_the_cluster(fleet_csvs, tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,current_a,temperature_c\n0,1,30\n1,1,nan\n")
+    assert main(["diagnose", *fleet_csvs, str(bad), "--each", "--json", str(tmp_path / "f.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "bad.csv" in err and "row 3" in err
+    assert main(["diagnose", *fleet_csvs, "--each", "--plot", str(tmp_path / "f.png")]) == 2
+    assert "--each" in capsys.readouterr().err

@@ -39,7 +39,7 @@ def _demo(args, out: Outputs) -> int:
 
 def _plan(args, out: Outputs) -> int:
     from .tasks.lift import plan_lift
-    options = {"solver": args.solver}
+    options = {"solver": args.solver, "careful_motion": args.careful_motion}
     if args.model:
         options["parameter_file"] = args.model
     plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
@@ -89,6 +89,8 @@ def _identify(args, out: Outputs) -> int:
 
 def _diagnose(args, out: Outputs) -> int:
     _check_physics_model(args)
+    if args.each:
+        return _diagnose_each(args, out)
     if args.physics == "mechanical":
         from .diagnose.mechanical import diagnose_mechanical_files
         result = diagnose_mechanical_files(args.recordings, plot=out.temporary("--plot"), columns=args.columns)
@@ -98,6 +100,28 @@ def _diagnose(args, out: Outputs) -> int:
                                         columns=args.columns)
     _stage_model(out, result)
     return _result(result, out)
+
+
+def _diagnose_each(args, out: Outputs) -> int:
+    """``diagnose --each``: one diagnosis per recording (a fleet) as Dask tasks, and the fleet's table. Every
+    recording and the parameter file are read and checked here first, before the cluster starts."""
+    from .identify.thermal import load_joint_parameters
+    from .recordings import read_recordings
+    from .studies.engine import EngineSettings
+    from .studies.fleet import diagnose_fleet
+    for option in ("--plot", "--write-model"):
+        if out.wanted(option):
+            raise InputError(option, option, str(out.paths[option]), "one per recording: not with --each")
+    engine = EngineSettings(scheduler=args.scheduler, workers=args.workers)
+    options = {"columns": args.columns}
+    if args.physics == "thermal" and args.model:
+        load_joint_parameters(args.model)
+        options["parameters"] = args.model
+    for path in args.recordings:
+        read_recordings([path], args.columns)
+    fleet = diagnose_fleet(args.recordings, args.physics, engine, **options)
+    print(fleet.report())
+    return _result(fleet.to_dict(), out, stdout=False)
 
 
 def _validate(args, out: Outputs) -> int:
@@ -230,7 +254,18 @@ def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
                                                    f"{'none' if name == 'validate' else 'stdout'})")
     if plot:
         cmd.add_argument("--plot", metavar="OUT.png", help=f"write the {name} figure here (default: none)")
+    if name == "diagnose":
+        cmd.add_argument("--each", action="store_true", help="flag: one diagnosis per recording (a fleet) as Dask "
+                         "tasks, and a table of which recordings show which missing physics")
+        _engine_arguments(cmd)
     return cmd
+
+
+def _engine_arguments(cmd: _Parser) -> None:
+    cmd.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                     help="Dask scheduler, e.g. tcp://127.0.0.1:8786 (default: a LocalCluster on this machine)")
+    cmd.add_argument("--workers", type=int, default=2,
+                     help="worker processes of the LocalCluster, count (default %(default)s; ignored with --scheduler)")
 
 
 def _demo_parser() -> _Parser:
@@ -254,6 +289,8 @@ def _plan_parser(name: str, description: str) -> _Parser:
                                                          "models/arm_left_4_joint.toml)")
         cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
         cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
+        cmd.add_argument("--careful-motion", action="store_true", help="flag: one direction per phase, slow near "
+                         "the joint stops, at rest at the end, an acceleration cost (LiftSettings.careful_motion)")
     else:
         cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=None,
                          help="winding limits to compare, °C (default: the elbow file's safety_cutoff_c and "
@@ -281,10 +318,7 @@ def _sweep_parser() -> _Parser:
     cmd.add_argument("--short", action="store_true", help="flag: a 5 s hold instead of 15 s")
     cmd.add_argument("--seed", type=int, default=0, help="seed of the sweep; run i's seed is word i of its "
                                                          "stream (default %(default)s)")
-    cmd.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                     help="Dask scheduler, e.g. tcp://127.0.0.1:8786 (default: a LocalCluster on this machine)")
-    cmd.add_argument("--workers", type=int, default=2,
-                     help="worker processes of the LocalCluster, count (default %(default)s; ignored with --scheduler)")
+    _engine_arguments(cmd)
     cmd.add_argument("--json", metavar="OUT", help="write the sweep JSON here (default: none)")
     cmd.add_argument("--plot", metavar="OUT.png", help="write the margin and hold histograms here (default: none)")
     return cmd
