@@ -50,7 +50,7 @@ from ..identify.fit_report import integrated_autocorrelation
 from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THERMAL_TERMS, JointParameters, ThermalFit,
                                 ThermalModel, canonical_terms, default_fixed, fit_grids, load_joint_parameters,
                                 parameter_file, start_values, structure_name)
-from ..identify.thermal_data import ThermalGrid, ThermalSettings, thermal_grid
+from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
 from ..model.parameters import THERMAL_KEYS
 from ..recordings import as_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
@@ -173,15 +173,18 @@ class _Fitter:
         return ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered)})
 
     def fit(self, terms: frozenset) -> ThermalFit:
-        """Best of the starts: the parameter file's, and the best fitted set with one term less."""
+        """Best of the starts: the best fitted set with one term less, and the parameter file's when
+        there is no such set or the network gains a node (a new node's split is not in the parent)."""
         model = self.model(terms)
         parents = [self.fits[terms - {t}] for t in terms if self.fits.get(terms - {t}) is not None]
         parents = [f for f in parents if f.success]
-        starts = [(start_values(self.params, model.terms), None)]
+        starts = []
         if parents:
             parent = min(parents, key=lambda f: f.rmse)
-            starts.insert(0, (start_values(self.params, model.terms, previous=parent.parameters),
-                              [parent.initial_offset_c[g.name] for g in self.grids]))
+            starts.append((start_values(self.params, model.terms, previous=parent.parameters),
+                           [parent.initial_offset_c[g.name] for g in self.grids]))
+        if not parents or all(f.nodes != model.nodes for f in parents):
+            starts.append((start_values(self.params, model.terms), None))
         fits = []
         for start, offsets in starts:
             fits.append(fit_grids(model, self.grids, start=start, offsets=offsets, settings=self.settings.fit,
@@ -292,6 +295,7 @@ class ThermalDiagnosis:
     success: bool
     status: str
     message: str
+    rows: Mapping[str, int] = dataclasses.field(default_factory=dict)  # the contract's rows: used, skipped, segments
     regimes: tuple[np.ndarray, ...] = ()
     selection: SubsetSelection | None = None
     fits: Mapping[frozenset, ThermalFit] = dataclasses.field(default_factory=dict)
@@ -360,7 +364,7 @@ class ThermalDiagnosis:
         base, final = self.baseline_fit, self.final_fit
         out = {"success": self.success, "status": self.status, "message": self.message, "physics": "thermal",
                "recordings": list(self.recordings),
-               "rows": {"used": int(sum(len(g) for g in self.grids)), "skipped": 0, "segments": len(self.grids)},
+               "rows": dict(self.rows),
                "speed_source": {g.name: g.speed_source for g in self.grids},
                "baseline": base.summary() if base is not None else None,
                "mismatches": self.localisations[0].to_list() if self.localisations else [],
@@ -440,12 +444,11 @@ def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) 
 
 
 def _too_short(grids: Sequence[ThermalGrid], settings: ThermalDiagnosisSettings) -> str:
-    for g in grids:
-        span = float(g.time_s[-1] - g.time_s[0])
-        if len(g) < settings.min_samples or span < settings.min_span_s:
-            return (f"{g.name}: {len(g)} samples over {span:.0f} s on the {settings.fit.min_step_s:g} s grid; a "
-                    f"diagnosis needs at least {settings.min_samples} samples over {settings.min_span_s:g} s "
-                    "(thermal time constants are minutes)")
+    count, span = sum(len(g) for g in grids), max((float(g.time_s[-1] - g.time_s[0]) for g in grids), default=0.0)
+    if count < settings.min_samples or span < settings.min_span_s:
+        return (f"{', '.join(g.name for g in grids)}: {count} samples on the {settings.fit.min_step_s:g} s grid, "
+                f"longest stretch {span:.0f} s; a diagnosis needs at least {settings.min_samples} samples and a "
+                f"stretch of {settings.min_span_s:g} s (thermal time constants are minutes)")
     return ""
 
 
@@ -478,12 +481,18 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     settings = settings or ThermalDiagnosisSettings()
     params = load_joint_parameters(parameters)
     recs = as_recordings(recordings, "thermal")
-    grids = tuple(thermal_grid(r, params, settings.fit) for r in recs)
-    usable, skipped = _usable_candidates(candidates, grids)
-    names = tuple(g.name for g in grids)
+    for rec in recs:
+        rec.require("current_a", "temperature_c")
+    split = [split_at_gaps(r) for r in recs]
+    grids = tuple(thermal_grid(part, params, settings.fit) for parts, _ in split for part in parts)
+    names = tuple(r.name for r in recs)
+    rows = {"used": sum(len(p) for parts, _ in split for p in parts), "skipped": sum(n for _, n in split),
+            "segments": len(grids)}
     short = _too_short(grids, settings)
     if short:
-        return ThermalDiagnosis(names, params, grids, False, "insufficient_data", short, cv_blocks=settings.cv_blocks)
+        return ThermalDiagnosis(names, params, grids, False, "insufficient_data", short, rows=rows,
+                                cv_blocks=settings.cv_blocks)
+    usable, skipped = _usable_candidates(candidates, grids)
     regimes = tuple(thermal_regimes(g, settings.regimes) for g in grids)
     specs = term_specs(params)
     hide = None if settings.progress is None else not settings.progress
@@ -499,7 +508,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     fits = dict(fitter.fits)
     if selection is None:
         return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
-                                "no candidate model converged within physical bounds", regimes, None, fits,
+                                "no candidate model converged within physical bounds", rows, regimes, None, fits,
                                 not_determinable=tuple(skipped), cv_blocks=settings.cv_blocks)
     final = fits[selection.chosen.terms]
     locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[frozenset()], final))
@@ -509,7 +518,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                f"{noise.total_c:.3g} K" + ("" if fitting else f" (> {settings.max_noise_ratio:g}): no candidate "
                                            "explains these recordings"))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
-                            regimes, selection, fits, locs, cv, noise,
+                            rows, regimes, selection, fits, locs, cv, noise,
                             tuple(skipped) + tuple(_undetermined(selection, fits)), settings.cv_blocks)
 
 

@@ -122,6 +122,30 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
                        speed_source=speed_source)
 
 
+def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,
+                  min_samples: int = 12) -> tuple[list[Recording], int]:
+    """The stretches of ``rec`` between gaps longer than ``factor`` median steps and ``min_gap_s`` (what
+    heated the motor during a gap is unknown: each stretch starts from its own first measurement, as
+    the contract's ``split_gaps_s``), and the number of samples in stretches shorter than ``min_samples``
+    (left out).  Stretches are named ``name[k]`` when there is more than one."""
+    t = np.asarray(rec.time_s, float)
+    if t.size < 3:
+        return [rec], 0
+    dt = np.diff(t)
+    cuts = np.flatnonzero(dt > max(factor * float(np.median(dt)), min_gap_s)) + 1
+    if not cuts.size:
+        return [rec], 0
+    parts, skipped = [], 0
+    for k, (a, b) in enumerate(zip(np.concatenate(([0], cuts)), np.concatenate((cuts, [t.size])))):
+        if b - a < min_samples:
+            skipped += int(b - a)
+            continue
+        columns = {f.name: getattr(rec, f.name)[a:b] for f in dataclasses.fields(rec)
+                   if isinstance(getattr(rec, f.name), np.ndarray)}
+        parts.append(dataclasses.replace(rec, name=f"{rec.name}[{k}]", row_offset=rec.row_offset + int(a), **columns))
+    return parts, skipped
+
+
 def _thermometry(rec: Recording, params: JointParameters, settings: "ThermalSettings", velocity: np.ndarray,
                  keep: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Winding temperature from the motor voltage and its weight (see :class:`ThermalSettings`)."""
