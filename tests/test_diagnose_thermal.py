@@ -153,7 +153,7 @@ def test_nested_test_corrects_for_autocorrelation_and_bonferroni():
     assert test.significant(1e-3, 1, 0.0)
     slow = nested_test(small, dataclasses.replace(large, tau=50.0))
     assert slow.p_value > 0.1 and not slow.significant(1e-3, 1, 0.0)
-    strong = SubsetFit(frozenset({"a"}), rss=60.0, n=1000, n_parameters=4, tau=50.0)
+    strong = SubsetFit(frozenset({"a"}), rss=60.0, n=1000, n_parameters=4)
     both = SubsetFit(frozenset({"a", "b"}), rss=59.5, n=1000, n_parameters=5, tau=1.0)
     only_b = SubsetFit(frozenset({"b"}), rss=99.0, n=1000, n_parameters=4)
     sel = subset_select([small, strong, only_b, both], SubsetSettings())

@@ -78,7 +78,7 @@ SENSOR_DRIVE_KEYS = ("drive_idle_w", "drive_loss_w_per_a2")
 _TERM_KEYS = {"friction_heating": FRICTION_KEYS, "copper_resistance": ("copper_alpha_per_k",),
               "iron_losses": (IRON_KEY,)}
 # Optional [thermal] keys a term decides (absent term: default); the file's other optional keys are kept.
-_TERM_OWNED = ("friction_heating_fraction", *FRICTION_KEYS, "friction_heat_node", "iron_loss_w", *_IRON_CONTRACT)
+_TERM_OWNED = ("friction_heating_fraction", "iron_loss_w", *_IRON_CONTRACT)
 UNITS = {k: unit(k) for k in {*(k for keys in THERMAL_KEYS.values() for k in keys), *FRICTION_KEYS,
                               "copper_alpha_per_k"}} | {IRON_KEY: "W s^2/rad^2"}
 # Search bounds of the optimiser (wide, technical; the diagnosis checks narrower physical ranges).
