@@ -291,16 +291,16 @@ def subset_select(fits: Sequence[SubsetFit], settings: SubsetSettings | None = N
     best = min(admissible, key=lambda f: f.rss)
     n_tests = max(len(admissible) - 1, 1)
 
-    by_terms = {f.terms: f for f in fits}
+    by_terms = {f.terms: f for f in admissible}
 
     def significant(small: SubsetFit, large: SubsetFit) -> bool:
         return nested_test(small, large).significant(settings.alpha, n_tests, settings.min_rmse_drop)
 
-    def adequate(f: SubsetFit) -> bool:
-        needed = all(significant(by_terms[f.terms - {t}], f) for t in f.terms if f.terms - {t} in by_terms)
-        return needed and (f is best or not significant(f, best))
+    def needed(f: SubsetFit) -> bool:
+        return all(significant(by_terms[f.terms - {t}], f) for t in f.terms if f.terms - {t} in by_terms)
 
-    candidates = [f for f in admissible if adequate(f)] or [min(admissible, key=lambda f: len(f.terms))]
+    good = [f for f in admissible if f is best or not significant(f, best)]
+    candidates = [f for f in good if needed(f)] or good
     chosen = min(candidates, key=lambda f: (len(f.terms), f.n_parameters, f.rss))
     equivalent = tuple(f for f in candidates if f is not chosen and len(f.terms) == len(chosen.terms))
     tests = {t: nested_test(by_terms[chosen.terms - {t}], chosen) for t in sorted(chosen.terms)

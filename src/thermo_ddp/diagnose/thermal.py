@@ -195,9 +195,22 @@ class _Fitter:
 
     def subset(self, terms: frozenset) -> SubsetFit:
         fit = self.fits[terms]
-        reason = "" if fit.success else f"fit failed: {fit.status}: {fit.message}"
+        # a fit stopped by its evaluation budget still has a real residual (an upper bound of the optimum's)
+        usable = fit.success or (fit.status == "max_iterations" and bool(np.all(np.isfinite(fit.residuals))))
+        reason = "" if usable else f"fit failed: {fit.status}: {fit.message}"
         return SubsetFit(terms, float(fit.residuals @ fit.residuals), fit.n_samples,
                          len(fit.stderr) + len(self.grids), _tau(fit), not reason, reason)
+
+    def polish(self, terms: frozenset) -> ThermalFit:
+        """The chosen set refitted from its values with four times the budget when its fit ran out of it."""
+        fit = self.fits[terms]
+        if fit.status == "max_iterations":
+            more = dataclasses.replace(self.settings.fit, max_nfev=4 * self.settings.fit.max_nfev)
+            again = fit_grids(self.model(terms), self.grids, start=dict(fit.parameters), settings=more,
+                              offsets=[fit.initial_offset_c[g.name] for g in self.grids], bounds=self.bounds)
+            self.bar.update(1)
+            self.fits[terms] = min((fit, again), key=lambda f: (not f.success, f.rmse))
+        return self.fits[terms]
 
     def cv_rmse(self, terms: frozenset) -> float:
         """Held-out RMSE: each contiguous block predicted (open-loop) by a fit that did not see it."""
@@ -504,6 +517,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
         selection = subset_select([fitter.subset(t) for t in sets], settings.selection)
         cv = None
         if selection is not None:
+            fitter.polish(selection.chosen.terms)
             cv = (fitter.cv_rmse(frozenset()), fitter.cv_rmse(selection.chosen.terms))
     fits = dict(fitter.fits)
     if selection is None:
