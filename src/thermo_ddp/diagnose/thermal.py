@@ -127,7 +127,7 @@ class ThermalDiagnosisSettings:
     cv_blocks: int = 3
     fit: ThermalSettings = ThermalSettings(min_step_s=10.0, max_step_s=10.0)
     regimes: ThermalRegimeSettings = ThermalRegimeSettings()
-    localise: ThermalLocaliseSettings = ThermalLocaliseSettings(min_effect_c=0.0)
+    localise: ThermalLocaliseSettings = ThermalLocaliseSettings()
     selection: SubsetSettings = SubsetSettings()
     max_noise_ratio: float = 3.0
     min_samples: int = 30
@@ -352,7 +352,7 @@ class ThermalDiagnosis:
         fit, test = self.final_fit, self.selection.term_tests[term]
         without = self.fits[self.final_terms - {term}]
         keys = [k for k in term_keys(term, canonical_terms("one_node", self.final_terms)) if k in fit.parameters]
-        collinear = sorted({c for k in keys for c in fit.collinear(k)} - {k for k in keys if not fit.collinear(k)})
+        collinear = sorted({c for k in keys for c in fit.collinear(k)})
         where = "; ".join(str(g) for g in self.explained.get(term, ()) if g.gain > 0) or "no located mismatch"
         evidence = (f"{structure_name(canonical_terms('one_node', self.final_terms - {term}))} -> {fit.model}: "
                     f"RMSE {without.rmse:.3g} -> {fit.rmse:.3g} K (-{100 * test.rmse_drop:.0f}%), likelihood ratio "
