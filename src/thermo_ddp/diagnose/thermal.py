@@ -25,7 +25,9 @@ relative RMSE drop of at least ``min_rmse_drop``; the smallest adequate set whos
 that test against the set without it wins.  Every fit searches inside the physical ranges of
 :func:`term_specs` (iron losses, for instance, cannot exceed the motor class's no-load losses, so
 they cannot pose as strong friction heat); parameters the data do not pin down (relative standard
-error >= 50 %) and their collinear partners are reported, never used to reject a term.
+error >= 50 %) and their collinear partners are reported, never used to reject a term.  A casing
+node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
+the drive node of ``two_node_drive``) and is listed in ``not_determinable``.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
 is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the
@@ -166,18 +168,21 @@ class _Fitter:
         self.params, self.grids, self.settings, self.bar = params, list(grids), settings, bar
         self.bounds = {k: b for spec in specs.values() for k, b in spec.bounds.items()}
         self.fits: dict[frozenset, ThermalFit] = {}
+        self._models: dict[frozenset, ThermalModel] = {}
 
     def model(self, terms: frozenset) -> ThermalModel:
-        ordered = canonical_terms("one_node", terms)
-        values = start_values(self.params, ordered)
-        return ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered)})
+        if terms not in self._models:
+            ordered = canonical_terms("one_node", terms)
+            values = start_values(self.params, ordered)
+            self._models[terms] = ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered)})
+        return self._models[terms]
 
     def fit(self, terms: frozenset) -> ThermalFit:
         """Best of the starts: the best fitted set with one term less, and the parameter file's when
         there is no such set or the network gains a node (a new node's split is not in the parent)."""
         model = self.model(terms)
         parents = [self.fits[terms - {t}] for t in terms if self.fits.get(terms - {t}) is not None]
-        parents = [f for f in parents if f.success]
+        parents = [f for f in parents if self.usable(f)]
         starts = []
         if parents:
             parent = min(parents, key=lambda f: f.rmse)
@@ -190,14 +195,17 @@ class _Fitter:
             fits.append(fit_grids(model, self.grids, start=start, offsets=offsets, settings=self.settings.fit,
                                   bounds=self.bounds))
             self.bar.update(1)
-        self.fits[terms] = min(fits, key=lambda f: (not f.success, f.rmse))
+        self.fits[terms] = min(fits, key=lambda f: (not self.usable(f), f.rmse))
         return self.fits[terms]
+
+    @staticmethod
+    def usable(fit: ThermalFit) -> bool:
+        """Converged, or stopped by its evaluation budget: a real residual (an upper bound of the optimum's)."""
+        return fit.success or (fit.status == "max_iterations" and bool(np.all(np.isfinite(fit.residuals))))
 
     def subset(self, terms: frozenset) -> SubsetFit:
         fit = self.fits[terms]
-        # a fit stopped by its evaluation budget still has a real residual (an upper bound of the optimum's)
-        usable = fit.success or (fit.status == "max_iterations" and bool(np.all(np.isfinite(fit.residuals))))
-        reason = "" if usable else f"fit failed: {fit.status}: {fit.message}"
+        reason = "" if self.usable(fit) else f"fit failed: {fit.status}: {fit.message}"
         return SubsetFit(terms, float(fit.residuals @ fit.residuals), fit.n_samples,
                          len(fit.stderr) + len(self.grids), _tau(fit), not reason, reason)
 
@@ -317,6 +325,7 @@ class ThermalDiagnosis:
     noise: Noise | None = None
     not_determinable: tuple[dict, ...] = ()
     cv_blocks: int = 3
+    hosted: frozenset = frozenset()  # in the final structure, not evidenced by the data (not named)
 
     @property
     def final_terms(self) -> frozenset:
@@ -332,7 +341,8 @@ class ThermalDiagnosis:
 
     @property
     def missing_physics(self) -> list[str]:
-        return [t for t in THERMAL_TERMS if t in self.final_terms]
+        """The named terms: the chosen set without the terms it only hosts (see :func:`_hosted`)."""
+        return [t for t in THERMAL_TERMS if t in self.final_terms and t not in self.hosted]
 
     @property
     def explained(self) -> dict[str, tuple[RegimeGain, ...]]:
@@ -486,6 +496,23 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
     return out
 
 
+def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, list[dict]]:
+    """A casing node whose winding time constant C_w R_wc is shorter than the grid's step is not
+    evidenced: the data cannot resolve it.  It stays in the structure when the drive node needs it (the
+    contract's drive node sits on the casing) but is not named."""
+    p = fit.parameters
+    if "casing_node" not in fit.terms:
+        return frozenset(), []
+    tau_s = p["winding_capacity_j_per_k"] * p["winding_casing_k_per_w"]
+    step_s = float(np.median(np.concatenate([np.diff(g.time_s) for g in grids])))
+    if tau_s >= step_s:
+        return frozenset(), []
+    return frozenset({"casing_node"}), [{
+        "term": "casing_node", "experiment": EXPERIMENTS["casing_node"],
+        "reason": f"fitted winding time constant C_w R_wc = {tau_s:.1f} s, below the {step_s:.0f} s step of the "
+                  "data: no casing node is evidenced (kept in the structure only to host the drive node)"}]
+
+
 def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | None = None,
                      candidates: Sequence[str] = CANDIDATE_TERMS,
                      settings: ThermalDiagnosisSettings | None = None) -> ThermalDiagnosis:
@@ -531,9 +558,11 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     message = (f"{final.model}: rmse {final.rmse:.3g} K = {noise.rmse_ratio:.2f} x the residual noise "
                f"{noise.total_c:.3g} K" + ("" if fitting else f" (> {settings.max_noise_ratio:g}): no candidate "
                                            "explains these recordings"))
+    hosted, unresolved = _hosted(final, grids)
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
-                            tuple(skipped) + tuple(_undetermined(selection, fits)), settings.cv_blocks)
+                            tuple(skipped) + tuple(unresolved) + tuple(_undetermined(selection, fits)),
+                            settings.cv_blocks, hosted)
 
 
 def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, **options) -> dict:
