@@ -139,7 +139,7 @@ def covariance(jacobian: np.ndarray, residuals: np.ndarray, floor: float = 1e-9)
     scale = np.linalg.norm(jacobian, axis=0)
     scale[scale == 0] = 1.0
     _, sing, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
-    if not sing.size:
+    if not sing.size or sing.max() == 0:
         return np.zeros((p, p)), 0
     rank = int(np.sum(sing > sing.max() * max(n, p) * np.finfo(float).eps * 1e3))
     sing = np.maximum(sing, floor * sing.max())
