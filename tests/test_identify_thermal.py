@@ -126,12 +126,15 @@ def test_sensitivities_match_finite_differences():
     plant = PlantParameters()
     rec = static_4a(params=plant, heating_s=1200.0, cooling_s=600.0, sample_rate_hz=0.5, seed=12).to_recording()
     grid = thermal_grid(rec, ELBOW)
-    model = ThermalModel(ELBOW, ("drive_heating", "friction_heating", "copper_resistance"))
-    values = np.array([{"friction_heating_fraction": 0.5, "copper_alpha_per_k": 0.004}.get(k, 0.0)
-                       or ELBOW.thermal[k] for k in model.keys])
+    model = ThermalModel(ELBOW, ("casing_node", "drive_heating", "friction_heating", "copper_resistance"))
+    values = np.array([{"friction_heat_linear_w_s_per_rad": 1.5, "friction_heat_quadratic_w_s2_per_rad2": 0.4,
+                        "copper_alpha_per_k": 0.004}.get(k, 0.0) or ELBOW.thermal[k] for k in model.keys])
     _, _, jac, jac_winding = model.simulate(grid, values, 0.3)
     for j in range(len(values) + 1):
-        step = 1e-4 * abs(values[j]) if j < len(values) else 1e-3
+        # the heat is linear in the friction coefficients: a large step is exact and keeps roundoff out of
+        # their tiny sensitivities in a static hold
+        linear = j < len(values) and model.keys[j].startswith("friction_heat")
+        step = (0.1 if linear else 1e-4 * abs(values[j])) if j < len(values) else 1e-3
         up, down = values.copy(), values.copy()
         if j < len(values):
             up[j] += step
@@ -214,3 +217,16 @@ def test_iron_losses_are_written_as_the_contract_iron_loss_the_planner_uses():
     assert len(iron) == 1 and iron[0].node == "winding"
     assert iron[0].power_w({"speed_abs_rad_s": 2.5}) == pytest.approx(0.03 * 2.5 ** 2, rel=1e-15)
     assert "identified" in written.sources["iron_loss_w"]
+
+
+def test_speed_regressor_says_where_it_comes_from_and_gaps_split_the_recording():
+    from thermo_ddp.identify.thermal_data import split_at_gaps
+    t = np.concatenate([np.arange(0.0, 600.0), np.arange(900.0, 1500.0), np.arange(5000.0, 5005.0)])
+    q = np.sin(0.5 * t)
+    base = dict(time_s=t, current_a=np.ones_like(t), temperature_c=np.full_like(t, 30.0))
+    assert thermal_grid(Recording(name="v", velocity=0.5 * np.cos(0.5 * t), **base), ELBOW).speed_source == "velocity"
+    assert thermal_grid(Recording(name="q", position=q, **base), ELBOW).speed_source == "position differences"
+    assert thermal_grid(Recording(name="none", **base), ELBOW).speed_source == "none"
+    parts, skipped = split_at_gaps(Recording(name="g", position=q, **base))
+    assert [p.name for p in parts] == ["g[0]", "g[1]"] and skipped == 5   # a 300 s gap; a 5-sample tail left out
+    assert parts[1].time_s[0] == 900.0 and np.array_equal(parts[1].position, q[600:1200])

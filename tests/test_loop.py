@@ -110,7 +110,7 @@ def test_chain_writes_recordings_models_figures_and_table(chain):
     original = load_parameters(out / "models" / f"{ELBOW}_original.toml")
     improved = load_parameters(out / "models" / f"{ELBOW}_improved.toml")
     assert original.thermal.model == "one_node" and original.thermal["friction_heating_fraction"] == 0.0
-    assert improved.thermal.model == "two_node_drive" and improved.thermal["friction_heating_fraction"] > 0.5
+    assert improved.thermal.model == "two_node_drive" and improved.thermal["friction_heat_linear_w_s_per_rad"] > 0.5
     assert json.loads((out / "loop.json").read_text()) == json.loads(json.dumps(table))
     for fig in ("loop.png", "loop_summary.png", "diagnosis.png"):
         assert (out / fig).stat().st_size > 10_000

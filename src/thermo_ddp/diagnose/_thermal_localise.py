@@ -15,7 +15,8 @@ noise is measured where a mismatch cannot hide: the residual minus its moving me
 time ``tau`` (variance inflation of a mean of correlated samples).  Every regime occurrence is cut
 into windows of about ``window_s``; a window is systematic when its mean residual ``m`` passes a
 z-test against noise, ``|m| > z sigma sqrt(tau / n)`` (Bonferroni over all windows, family-wise
-false-alarm rate ``alpha``), *and* ``|m| >= min_effect_c`` (a physical size worth a model term).
+false-alarm rate ``alpha``), *and* ``|m| >= min_effect_c`` (default 0: no absolute gate; whether a
+term is worth naming is the selection's nested test, not a window size).
 Adjacent systematic windows of one occurrence with the same sign are merged into intervals.
 """
 from __future__ import annotations
@@ -50,12 +51,12 @@ class ThermalRegimeSettings:
                   min_effect_c="[0, inf)", alpha="(0, 1)", min_samples="[2, inf)")
 class ThermalLocaliseSettings:
     """Windows of about ``window_s`` are tested against the noise of a ``noise_window_s`` high-pass at
-    false-alarm rate ``alpha``; a systematic window must be at least ``min_effect_c`` in size and hold
+    false-alarm rate ``alpha``; a systematic window must be at least ``min_effect_c`` in size (default 0) and hold
     ``min_samples`` samples (module docstring)."""
 
     window_s: float = 600.0
     noise_window_s: float = 120.0
-    min_effect_c: float = 0.5
+    min_effect_c: float = 0.0
     alpha: float = 0.01
     min_samples: int = 3
 

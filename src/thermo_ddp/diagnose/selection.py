@@ -26,6 +26,7 @@ import math
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+from scipy import stats
 
 from .._config import checked_settings
 from ..identify.fit_report import FitResult
@@ -201,3 +202,107 @@ def forward_select(fit: Callable[[tuple[str, ...]], ModelFit], locate: Callable[
         current = best.candidate
         found = locate(current)
     return Selection(start, current, tuple(accepted), tuple(verdicts), first, found)
+
+
+# ----------------------------------------------------------------------------- joint search, nested tests
+@dataclasses.dataclass(frozen=True)
+class SubsetFit:
+    """One fitted term set for :func:`subset_select`: residual sum of squares over ``n`` samples with
+    ``n_parameters`` free parameters; ``tau`` is its residual's integrated autocorrelation time in
+    samples (the variance inflation of a mean of correlated samples); ``admissible`` is False when the
+    fit failed or an identifiable parameter left its physical range (``reason`` says which)."""
+
+    terms: frozenset
+    rss: float
+    n: int
+    n_parameters: int
+    tau: float = 1.0
+    admissible: bool = True
+    reason: str = ""
+
+    @property
+    def rmse(self) -> float:
+        return math.sqrt(self.rss / max(self.n, 1))
+
+
+@dataclasses.dataclass(frozen=True)
+class NestedTest:
+    """Likelihood-ratio test of ``small`` against ``large``: Gaussian residuals, the effective sample
+    size n / tau corrected for the residual autocorrelation of the larger model."""
+
+    small: SubsetFit
+    large: SubsetFit
+    statistic: float
+    df: int
+    p_value: float
+    rmse_drop: float  # 1 - rmse(large) / rmse(small)
+
+    def significant(self, alpha: float, n_tests: int, min_rmse_drop: float) -> bool:
+        """Bonferroni-corrected p below ``alpha`` AND a relative RMSE drop of at least ``min_rmse_drop``."""
+        return self.p_value * max(n_tests, 1) < alpha and self.rmse_drop >= min_rmse_drop
+
+
+def nested_test(small: SubsetFit, large: SubsetFit) -> NestedTest:
+    """LR = (n / tau) ln(RSS_small / RSS_large) against chi^2 with the difference in parameter counts
+    (at least 1: a non-nested pair of equal size is compared as if one parameter apart)."""
+    n_eff = large.n / max(large.tau, 1.0)
+    ratio = small.rss / large.rss if large.rss > 0 else math.inf
+    statistic = float(n_eff * math.log(max(ratio, 1.0)))
+    df = max(large.n_parameters - small.n_parameters, 1)
+    drop = 1.0 - large.rmse / small.rmse if small.rmse > 0 else 0.0
+    return NestedTest(small, large, statistic, df, float(stats.chi2.sf(statistic, df)), float(drop))
+
+
+@checked_settings("subset selection settings", alpha="(0, 1)", min_rmse_drop="[0, 1)")
+class SubsetSettings:
+    """``alpha``: family-wise level of the nested tests (Bonferroni over the models compared);
+    ``min_rmse_drop``: smallest relative RMSE drop that makes a term worth naming."""
+
+    alpha: float = 0.001
+    min_rmse_drop: float = 0.10
+
+
+@dataclasses.dataclass(frozen=True)
+class SubsetSelection:
+    """Outcome of :func:`subset_select`: the chosen term set, the best-fitting admissible one, the
+    equally good sets of the same size (what the data cannot tell apart), the per-term tests of the
+    chosen set against itself without the term, and the number of tests the level is corrected for."""
+
+    chosen: SubsetFit
+    best: SubsetFit
+    equivalent: tuple[SubsetFit, ...]
+    term_tests: Mapping[str, NestedTest]
+    n_tests: int
+    fits: tuple[SubsetFit, ...]
+
+
+def subset_select(fits: Sequence[SubsetFit], settings: SubsetSettings | None = None) -> SubsetSelection | None:
+    """Joint search over fitted term sets (all subsets of a small candidate set).
+
+    The reference is the admissible set with the smallest residual.  A set is adequate when the
+    reference is not significantly better (:meth:`NestedTest.significant`, Bonferroni over the sets
+    compared) and each of its terms is significant against the set without it (backward
+    elimination).  The chosen set is the smallest adequate one (fewest terms, then parameters, then
+    residual); other adequate sets of that size are its equivalents.  None if no fit is admissible."""
+    settings = settings or SubsetSettings()
+    admissible = [f for f in fits if f.admissible]
+    if not admissible:
+        return None
+    best = min(admissible, key=lambda f: f.rss)
+    n_tests = max(len(admissible) - 1, 1)
+
+    by_terms = {f.terms: f for f in admissible}
+
+    def significant(small: SubsetFit, large: SubsetFit) -> bool:
+        return nested_test(small, large).significant(settings.alpha, n_tests, settings.min_rmse_drop)
+
+    def needed(f: SubsetFit) -> bool:
+        return all(significant(by_terms[f.terms - {t}], f) for t in f.terms if f.terms - {t} in by_terms)
+
+    good = [f for f in admissible if f is best or not significant(f, best)]
+    candidates = [f for f in good if needed(f)] or good
+    chosen = min(candidates, key=lambda f: (len(f.terms), f.n_parameters, f.rss))
+    equivalent = tuple(f for f in candidates if f is not chosen and len(f.terms) == len(chosen.terms))
+    tests = {t: nested_test(by_terms[chosen.terms - {t}], chosen) for t in sorted(chosen.terms)
+             if chosen.terms - {t} in by_terms}
+    return SubsetSelection(chosen, best, equivalent, tests, n_tests, tuple(fits))

@@ -1,56 +1,64 @@
-"""Thermal diagnosis: fit the one-node baseline (seed report eq. 7 with R(T), eq. 5), locate where
-and in which regime it misfits, name the missing physics from a candidate library, refit, validate
-on held-out data, and write the improved contract parameter file.
+"""Thermal diagnosis: fit the one-node baseline (seed report eq. 7 with R(T), eq. 5) and every
+combination of candidate terms, choose the smallest combination that no larger one beats by a
+statistical test, name what the data cannot tell apart, and say so when nothing fits.
 
-Candidates (contract term names) and the parameter-file mapping of the final model:
+Candidates (contract term names) are free, physically bounded parts of the one thermal network
+(:func:`thermo_ddp.model.thermal.network_from_parameters`, through :mod:`thermo_ddp.identify.thermal`):
 
-==================  =========================================================  =========================
+==================  =========================================================  ==========================
 term                physics                                                     parameter file
-==================  =========================================================  =========================
-friction_heating    a fraction of the friction power tau_f(v) v heats the      ``friction_heating_fraction``
-                    motor (sensor node of one_node, casing otherwise)
+==================  =========================================================  ==========================
+friction_heating    heat c1 |v| + c2 v^2 (free, >= 0; winding of a one-node     ``friction_heat_linear_w_s_per_rad``,
+                    network, casing otherwise), not tied to [motor] friction    ``friction_heat_quadratic_w_s2_per_rad2``
+drive_heating       idle W + W/A^2 i^2 on the sensor node (one node), or a      ``drive_idle_w``, ``drive_loss_w_per_a2``
+                    drive node heating the casing (with the casing node)        (+ ``model = "two_node_drive"``)
 casing_node         winding and casing nodes, sensor on the casing (eq. 6)      ``model = "two_node"``
-drive_heating       a drive node heated by idle + i^2 losses, coupled to the    ``model = "two_node_drive"``
-                    casing and ambient: raises idle temperature, slows cooling
-                    (implies the casing node: the drive heats the casing)
 copper_resistance   free temperature coefficient of R(T) (eq. 3)                ``[motor] copper_alpha_per_k``
-iron_losses         speed-dependent loss k v^2 in the winding                   ``[thermal] iron_loss_w`` (+ ref speed, exponent 2)
-==================  =========================================================  =========================
+iron_losses         speed-dependent loss P_ref (|v| / 1 rad/s)^2 in the winding ``iron_loss_w`` (+ ref speed, exponent)
+==================  =========================================================  ==========================
 
-Each candidate is refitted (output error, :mod:`thermo_ddp.identify.thermal`) and accepted only if
-(a) it explains the located mismatch in its regime, (b) it lowers the blocked cross-validated RMSE
-(contiguous held-out segments of every recording; the simulation runs through a held-out segment
-from the state the training fit predicts) and (c) its parameters are physical (:data:`TERM_SPECS`).
-Information criteria are not used: output-error residuals are strongly autocorrelated.
+Selection (:func:`thermo_ddp.diagnose.selection.subset_select`): every subset of the usable
+candidates is fitted (output error, multi-start: the best nested fit and the parameter file);
+nested likelihood-ratio tests with the effective sample size corrected for the residual
+autocorrelation, p < ``alpha`` Bonferroni-corrected for the number of models compared, AND a
+relative RMSE drop of at least ``min_rmse_drop``; the smallest adequate set whose every term passes
+that test against the set without it wins.  Every fit searches inside the physical ranges of
+:func:`term_specs` (iron losses, for instance, cannot exceed the motor class's no-load losses, so
+they cannot pose as strong friction heat); parameters the data do not pin down (relative standard
+error >= 50 %) and their collinear partners are reported, never used to reject a term.  A casing
+node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
+the drive node of ``two_node_drive``) and is listed in ``not_determinable``.
 
-Iron losses and friction heating have nearly the same shape in one motion pattern (both grow with
-speed); they are told apart physically: iron losses of this motor class are bounded by its no-load
-losses (see :data:`IRON_MAX`), so a speed-dependent heat of several watts can only be friction.
+Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
+is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the
+sensor quantisation), or no fit is admissible; ``insufficient_data`` when the recordings are too
+short to fit and cross-validate.  Validation: blocked cross-validation of baseline and final.
 """
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require
-from ..errors import InputError
-from ..identify.thermal import (IRON_KEY, THERMAL_TERMS, JointParameters, ThermalFit, ThermalModel,
-                                default_fixed, fit_grids, load_joint_parameters, network_model, parameter_file,
-                                start_values)
-from ..identify.thermal_data import ThermalGrid, ThermalSettings, thermal_grid
+from .._figures import new_figure
+from ..identify.fit_report import integrated_autocorrelation
+from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THERMAL_TERMS, JointParameters, ThermalFit,
+                                ThermalModel, canonical_terms, default_fixed, fit_grids, load_joint_parameters,
+                                parameter_file, start_values, structure_name)
+from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
+from ..model.parameters import THERMAL_KEYS
 from ..recordings import as_recordings, read_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
-                                thermal_regimes)
+                                noise_model, thermal_regimes)
 from .localise import Localisation, ResidualSeries
-from .selection import (ModelFit, SelectedTerms, Selection, SelectionSettings, TermSpec, forward_select,
-                        physical_violations)
-from .._figures import new_figure
+from .selection import SubsetFit, SubsetSelection, SubsetSettings, TermSpec, subset_select
 
 log = logging.getLogger(__name__)
 
@@ -60,11 +68,23 @@ CANDIDATE_TERMS = THERMAL_TERMS
 # (datasheets list no-load currents of 0.05-0.3 A; the no-load power also covers bearing friction).
 NO_LOAD_CURRENT_A = 0.1
 IRON_SHARE_OF_NO_LOAD = 0.5
-_POS = (0.0, math.inf)
+# The experiment that separates each term from what it can be confused with.
+EXPERIMENTS = {
+    "friction_heating": "move at two speeds (e.g. 0.5 and 2 rad/s, 20 min each) with a light load, and hold the "
+                        "same current still for 20 min next to it",
+    "iron_losses": "spin unloaded at 2 rad/s for 10 min with the current near zero (gearbox disengaged if possible), "
+                   "then at 1 rad/s: iron losses scale with the motor speed squared, gearbox friction does not",
+    "drive_heating": "leave the robot powered and idle (current near zero) for 1 h, then switch the drive off and "
+                     "record the cooling for 1 h",
+    "casing_node": "current steps (e.g. 8 A for 30 s, 150 s apart) with the motor voltage logged: the winding "
+                   "resistance shows the fast winding node the casing sensor smooths out",
+    "copper_resistance": "hold two currents (e.g. 3 A and 6 A) until steady with the motor voltage logged",
+}
+_CASING_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
 
 
 def iron_max(params: JointParameters) -> float:
-    """Largest physical iron-loss coefficient k [W s^2/rad^2] (joint-side speed), see module docstring."""
+    """Largest physical iron-loss coefficient k [W s^2/rad^2] (joint-side speed), see the constants above."""
     m = params.motor
     no_load_speed = m.bus_voltage_v / (m.back_emf_v_s_per_rad * m.gear_ratio)
     return IRON_SHARE_OF_NO_LOAD * m.bus_voltage_v * NO_LOAD_CURRENT_A / no_load_speed ** 2
@@ -73,51 +93,56 @@ def iron_max(params: JointParameters) -> float:
 def term_specs(params: JointParameters) -> dict[str, TermSpec]:
     """Physical ranges of every term's parameters (inclusive).  Capacities: 0.1-20 kg of aluminium or
     copper (385-900 J/kg/K); resistances: maxon class data, winding-housing 0.5-5 K/W and
-    housing-ambient 1-10 K/W, widened; copper alpha: 0.00393 /K (report eq. 3) +-10 %."""
+    housing-ambient 1-10 K/W, widened; copper alpha: 0.00393 /K (report eq. 3) +-10 %; heat >= 0
+    (friction heat is free: no bound from the file's friction)."""
+    casing = {"winding_capacity_j_per_k": (1.0, 1000.0), "casing_capacity_j_per_k": (100.0, 2e4),
+              "winding_casing_k_per_w": (0.05, 10.0), "casing_ambient_k_per_w": (0.1, 20.0)}
     return {
         "one_node": TermSpec("one_node", {"capacity_j_per_k": (100.0, 2e4), "resistance_k_per_w": (0.1, 20.0)}),
-        "casing_node": TermSpec("casing_node", {"winding_capacity_j_per_k": (1.0, 1000.0),
-                                                "casing_capacity_j_per_k": (100.0, 2e4),
-                                                "winding_casing_k_per_w": (0.05, 10.0),
-                                                "casing_ambient_k_per_w": (0.1, 20.0)}),
-        "drive_heating": TermSpec("drive_heating", {"winding_capacity_j_per_k": (1.0, 1000.0),
-                                                    "casing_capacity_j_per_k": (100.0, 2e4),
-                                                    "winding_casing_k_per_w": (0.05, 10.0),
-                                                    "casing_ambient_k_per_w": (0.1, 20.0),
-                                                    "drive_capacity_j_per_k": (10.0, 1e4),
+        "casing_node": TermSpec("casing_node", casing),
+        "drive_heating": TermSpec("drive_heating", {"drive_capacity_j_per_k": (10.0, 1e4),
                                                     "drive_casing_k_per_w": (0.02, 50.0),
-                                                    "drive_idle_w": (0.5, 100.0)}),
-        "friction_heating": TermSpec("friction_heating", {"friction_heating_fraction": (0.0, 1.0)}),
+                                                    "drive_idle_w": (0.0, 100.0), "drive_loss_w_per_a2": (0.0, 5.0)}),
+        "friction_heating": TermSpec("friction_heating", {k: (0.0, math.inf) for k in FRICTION_KEYS}),
         "copper_resistance": TermSpec("copper_resistance", {"copper_alpha_per_k": (0.0035, 0.0045)}),
         "iron_losses": TermSpec("iron_losses", {IRON_KEY: (0.0, iron_max(params))}),
     }
 
 
-_TERM_PARAMETERS = {
-    "friction_heating": ("friction_heating_fraction",), "copper_resistance": ("copper_alpha_per_k",),
-    "iron_losses": (IRON_KEY,),
-    "casing_node": ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w",
-                    "casing_ambient_k_per_w"),
-    "drive_heating": ("drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w", "drive_idle_w",
-                      "drive_loss_w_per_a2"),
-}
+def term_keys(term: str, terms: Sequence[str]) -> tuple[str, ...]:
+    """The parameter-file keys ``term`` decides in the structure ``terms``."""
+    if term == "drive_heating":
+        return THERMAL_KEYS["two_node_drive"][4:] if "casing_node" in terms else SENSOR_DRIVE_KEYS
+    return {"friction_heating": FRICTION_KEYS, "copper_resistance": ("copper_alpha_per_k",),
+            "iron_losses": (IRON_KEY,), "casing_node": _CASING_KEYS}[term]
 
 
 @dataclasses.dataclass(frozen=True)
 class ThermalDiagnosisSettings:
-    """``cv_blocks``: contiguous held-out segments per recording; ``fit``: grid/optimiser settings of
-    every fit (10 s grid: thermal time constants are >= tens of seconds, the held losses are averaged
-    exactly); ``progress``: tqdm bar over the candidate fits (None: only on a terminal)."""
+    """``cv_blocks``: contiguous held-out segments per recording (validation); ``fit``: grid/optimiser
+    settings of every fit (10 s grid: thermal time constants are >= tens of seconds, the held losses
+    are averaged exactly); ``selection``: level and effect size of the nested tests;
+    ``max_noise_ratio``: the chosen model does not fit when its RMSE exceeds this many noise
+    standard deviations; ``min_samples`` / ``min_span_s``: less data per recording (on the grid) is
+    ``insufficient_data``; ``progress``: tqdm bar over the fits (None: only on a terminal)."""
 
     cv_blocks: int = 3
     fit: ThermalSettings = ThermalSettings(min_step_s=10.0, max_step_s=10.0)
     regimes: ThermalRegimeSettings = ThermalRegimeSettings()
     localise: ThermalLocaliseSettings = ThermalLocaliseSettings()
-    selection: SelectionSettings = SelectionSettings(min_concentration=0.8)
+    selection: SubsetSettings = SubsetSettings()
+    max_noise_ratio: float = 3.0
+    min_samples: int = 30
+    min_span_s: float = 900.0
     progress: bool | None = None
 
     def __post_init__(self) -> None:
-        require(self.cv_blocks >= 2, "thermal diagnosis settings", "cv_blocks", self.cv_blocks, "must be >= 2")
+        name = "thermal diagnosis settings"
+        require(isinstance(self.cv_blocks, int) and self.cv_blocks >= 2, name, "cv_blocks", self.cv_blocks, "must be >= 2")
+        require(self.max_noise_ratio > 1, name, "max_noise_ratio", self.max_noise_ratio, "must be > 1")
+        require(self.min_samples >= 4 * self.cv_blocks, name, "min_samples", self.min_samples,
+                f"must be >= 4 cv_blocks = {4 * self.cv_blocks}")
+        require(self.min_span_s >= 0, name, "min_span_s", self.min_span_s, "must be >= 0")
 
 
 def _blocks(grids: Sequence[ThermalGrid], n_blocks: int) -> list[np.ndarray]:
@@ -129,73 +154,96 @@ def _blocks(grids: Sequence[ThermalGrid], n_blocks: int) -> list[np.ndarray]:
     return out
 
 
+def _tau(fit: ThermalFit) -> float:
+    """Pooled integrated autocorrelation time: n / sum over recordings of n_r / tau_r."""
+    parts = [fit.residuals[fit.rows(name)] for name in fit.recordings]
+    return fit.n_samples / sum(r.size / integrated_autocorrelation(r) for r in parts)
+
+
 class _Fitter:
-    """Fits of term sets with blocked cross-validation, cached by network structure."""
+    """Fits of term sets (multi-start), their admissibility and blocked cross-validation."""
 
     def __init__(self, params: JointParameters, grids: Sequence[ThermalGrid], settings: ThermalDiagnosisSettings,
-                 specs: Sequence[TermSpec], bar):
-        self.params, self.grids, self.settings, self.specs, self.bar = params, list(grids), settings, specs, bar
-        self.blocks = _blocks(grids, settings.cv_blocks)
-        self.cache: dict[tuple, ModelFit] = {}
-        self.fits: dict[tuple, ThermalFit] = {}
+                 specs: Mapping[str, TermSpec], bar):
+        self.params, self.grids, self.settings, self.bar = params, list(grids), settings, bar
+        self.bounds = {k: b for spec in specs.values() for k, b in spec.bounds.items()}
+        self.fits: dict[frozenset, ThermalFit] = {}
+        self._models: dict[frozenset, ThermalModel] = {}
 
-    @staticmethod
-    def key(terms: Sequence[str]) -> tuple:
-        model = network_model(terms)
-        return (model,) + tuple(sorted(t for t in terms if t not in ("casing_node", "drive_heating")))
+    def model(self, terms: frozenset) -> ThermalModel:
+        if terms not in self._models:
+            ordered = canonical_terms("one_node", terms)
+            values = start_values(self.params, ordered)
+            self._models[terms] = ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered)})
+        return self._models[terms]
 
-    def thermal_fit(self, terms: Sequence[str]) -> ThermalFit:
-        self(tuple(terms))
-        return self.fits[self.key(terms)]
-
-    def _parent(self, terms: Sequence[str]) -> ThermalFit | None:
-        fits = [(len(k), f) for k, f in self.fits.items() if set(f.terms) <= set(terms) and f.success]
-        return max(fits, key=lambda x: x[0])[1] if fits else None
-
-    def _full_fit(self, model: ThermalModel) -> ThermalFit:
-        """Best of two starts (the closest fitted parent, the parameter file), preferring
-        converged fits, then physical ones (a network may fit as well with a node collapsed), then rmse."""
-        parent = self._parent(model.terms)
-        starts = [(start_values(self.params, model.terms), None)]
-        if parent is not None:
-            starts.insert(0, (start_values(self.params, model.terms, previous=parent.parameters),
-                              [parent.initial_offset_c[g.name] for g in self.grids]))
+    def fit(self, terms: frozenset) -> ThermalFit:
+        """Best of the starts: the best fitted set with one term less, and the parameter file's when
+        there is no such set or the network gains a node (a new node's split is not in the parent)."""
+        model = self.model(terms)
+        parents = [self.fits[terms - {t}] for t in terms if self.fits.get(terms - {t}) is not None]
+        parents = [f for f in parents if self.usable(f)]
+        starts = []
+        if parents:
+            parent = min(parents, key=lambda f: f.rmse)
+            starts.append((start_values(self.params, model.terms, previous=parent.parameters),
+                           [parent.initial_offset_c[g.name] for g in self.grids]))
+        if not parents or all(f.nodes != model.nodes for f in parents):
+            starts.append((start_values(self.params, model.terms), None))
         fits = []
         for start, offsets in starts:
-            fits.append(fit_grids(model, self.grids, start=start, offsets=offsets, settings=self.settings.fit))
+            fits.append(fit_grids(model, self.grids, start=start, offsets=offsets, settings=self.settings.fit,
+                                  bounds=self.bounds))
             self.bar.update(1)
-        return min(fits, key=lambda f: (not f.success, bool(physical_violations(f.parameters, self.specs)), f.rmse))
+        self.fits[terms] = min(fits, key=lambda f: (not self.usable(f), f.rmse))
+        return self.fits[terms]
 
-    def __call__(self, terms: tuple[str, ...]) -> ModelFit:
-        key = self.key(terms)
-        if key in self.cache:
-            return dataclasses.replace(self.cache[key], terms=tuple(terms))
-        fixed_keys = default_fixed(terms)
-        values = start_values(self.params, terms)
-        model = ThermalModel(self.params, terms, {k: values[k] for k in fixed_keys})
-        full = self._full_fit(model)
-        self.fits[key] = full
+    @staticmethod
+    def usable(fit: ThermalFit) -> bool:
+        """Converged, or stopped by its evaluation budget: a real residual (an upper bound of the optimum's)."""
+        return fit.success or (fit.status == "max_iterations" and bool(np.all(np.isfinite(fit.residuals))))
+
+    def subset(self, terms: frozenset) -> SubsetFit:
+        fit = self.fits[terms]
+        reason = "" if self.usable(fit) else f"fit failed: {fit.status}: {fit.message}"
+        return SubsetFit(terms, float(fit.residuals @ fit.residuals), fit.n_samples,
+                         len(fit.stderr) + len(self.grids), _tau(fit), not reason, reason)
+
+    def polish(self, terms: frozenset) -> ThermalFit:
+        """The chosen set refitted from its values with four times the budget when its fit ran out of it."""
+        fit = self.fits[terms]
+        if fit.status == "max_iterations":
+            more = dataclasses.replace(self.settings.fit, max_nfev=4 * self.settings.fit.max_nfev)
+            again = fit_grids(self.model(terms), self.grids, start=dict(fit.parameters), settings=more,
+                              offsets=[fit.initial_offset_c[g.name] for g in self.grids], bounds=self.bounds)
+            self.bar.update(1)
+            self.fits[terms] = min((fit, again), key=lambda f: (not f.success, f.rmse))
+        return self.fits[terms]
+
+    def cv_rmse(self, terms: frozenset) -> float:
+        """Held-out RMSE: each contiguous block predicted (open-loop) by a fit that did not see it."""
+        full = self.fits[terms]
+        model = self.model(terms)
+        blocks = _blocks(self.grids, self.settings.cv_blocks)
+        every = np.concatenate(blocks)
         cv = np.array(full.residuals, float)
-        if full.success:
-            start = dict(full.parameters)
-            offsets = [full.initial_offset_c[g.name] for g in self.grids]
-            for b in np.unique(np.concatenate(self.blocks)):
-                weights = [(blk != b).astype(float) for blk in self.blocks]
-                held = fit_grids(model, self.grids, start=start, offsets=offsets, weights=weights,
-                                 settings=self.settings.fit)
-                self.bar.update(1)
-                rows = np.concatenate(self.blocks) == b
-                cv[rows] = held.residuals[rows]
-        mf = ModelFit(tuple(terms), full, cv, np.concatenate(self.blocks),
-                      np.concatenate([[g.name] * len(g) for g in self.grids]),
-                      np.concatenate([g.time_s for g in self.grids]))
-        self.cache[key] = mf
-        return mf
+        offsets = [full.initial_offset_c[g.name] for g in self.grids]
+        for b in np.unique(every):
+            weights = [(blk != b).astype(float) for blk in blocks]
+            held = fit_grids(model, self.grids, start=dict(full.parameters), offsets=offsets, weights=weights,
+                             settings=self.settings.fit, bounds=self.bounds)
+            self.bar.update(1)
+            cv[every == b] = held.residuals[every == b]
+        return float(np.sqrt(np.mean(cv ** 2)))
+
+
+def _labels(fit: ThermalFit) -> np.ndarray:
+    return np.concatenate([[name] * count for name, count in zip(fit.recordings, fit.sample_counts)])
 
 
 @dataclasses.dataclass(frozen=True)
 class RegimeGain:
-    """How much of the located mismatch of one regime an accepted term removed."""
+    """How much of the located mismatch of one regime a term removed."""
 
     regime: str
     gain: float    # 1 - mean-square residual after / before, inside that regime's mismatch intervals
@@ -205,102 +253,197 @@ class RegimeGain:
         return f"{self.regime} -{100 * self.gain:.0f}% ({100 * self.share:.0f}% of the reduction)"
 
 
-def regime_gains(current: ModelFit, candidate: ModelFit, localisation: Localisation) -> tuple[RegimeGain, ...]:
-    """Per regime of the located mismatches: the candidate's local gain and share (largest share first)."""
-    before, after = current.fit.residuals ** 2, candidate.fit.residuals ** 2
-    masks: dict[str, np.ndarray] = {}
+def regime_gains(before: ThermalFit, after: ThermalFit, localisation: Localisation) -> tuple[RegimeGain, ...]:
+    """Per regime of the located mismatches of ``before``: the local gain and share (largest share first)."""
+    r0, r1 = before.residuals ** 2, after.residuals ** 2
+    names, masks = _labels(before), {}
     for m in localisation.mismatches:
-        mask = masks.setdefault(m.regime, np.zeros(before.size, dtype=bool))
-        mask |= (current.recording == m.recording) & (current.time_s >= m.start_s) & (current.time_s <= m.end_s)
-    total = sum(float((before - after)[mask].sum()) for mask in masks.values())
-    out = [RegimeGain(r, float(1 - after[mask].mean() / before[mask].mean()) if before[mask].mean() > 0 else 0.0,
-                      float((before - after)[mask].sum() / total) if total > 0 else 0.0)
+        mask = masks.setdefault(m.regime, np.zeros(r0.size, dtype=bool))
+        mask |= (names == m.recording) & (before.time_s >= m.start_s) & (before.time_s <= m.end_s)
+    total = sum(float((r0 - r1)[mask].sum()) for mask in masks.values())
+    out = [RegimeGain(r, float(1 - r1[mask].mean() / r0[mask].mean()) if r0[mask].mean() > 0 else 0.0,
+                      float((r0 - r1)[mask].sum() / total) if total > 0 else 0.0)
            for r, mask in masks.items() if mask.any()]
     return tuple(sorted(out, key=lambda g: -g.share))
 
 
 @dataclasses.dataclass(frozen=True)
-class ThermalDiagnosis(SelectedTerms):
+class Noise:
+    """Noise of the chosen model's residual: high-pass scale, sensor quantum, and the RMSE ratio."""
+
+    sigma_c: float
+    quantum_c: float
+    rmse_ratio: float
+
+    @property
+    def total_c(self) -> float:
+        return math.sqrt(self.sigma_c ** 2 + self.quantum_c ** 2 / 12)
+
+
+def _quantum(grids: Sequence[ThermalGrid]) -> float:
+    """The sensor's quantisation step: the smallest change between successive readings when the readings
+    lie on a lattice of it (0 for continuous readings)."""
+    steps = np.concatenate([np.abs(np.diff(g.measured_c)) for g in grids])
+    steps = steps[steps > 1e-9]
+    if not steps.size:
+        return 0.0
+    q = float(steps.min())
+    return q if np.all(np.abs(steps / q - np.round(steps / q)) < 0.05) else 0.0
+
+
+def _noise(fit: ThermalFit, grids: Sequence[ThermalGrid], window_s: float) -> Noise:
+    sigma = math.sqrt(np.mean([noise_model(s, window_s).sigma_c ** 2 for s in _series(fit, grids)]))
+    quantum = _quantum(grids)
+    total = math.sqrt(sigma ** 2 + quantum ** 2 / 12)
+    return Noise(sigma, quantum, fit.rmse / total if total > 0 else math.inf)
+
+
+def _series(fit: ThermalFit, grids: Sequence[ThermalGrid], regimes: Sequence[np.ndarray] | None = None):
+    return [ResidualSeries(g.name, g.time_s, fit.residuals[fit.rows(g.name)],
+                           regimes[k] if regimes is not None else np.full(len(g), "any"))
+            for k, g in enumerate(grids)]
+
+
+@dataclasses.dataclass(frozen=True)
+class ThermalDiagnosis:
     """Result of :func:`diagnose_thermal`; ``to_dict()`` is the contract's diagnosis JSON plus
-    ``parameter_file`` (the improved parameter sections, loadable with ``parameters_from_dict``)."""
+    ``parameter_file`` (the improved parameter sections, loadable with ``parameters_from_dict``),
+    ``speed_source`` and ``noise``.  ``fits`` holds every fitted term set (empty without data)."""
 
     recordings: tuple[str, ...]
-    selection: Selection
-    grids: tuple[ThermalGrid, ...]
-    regimes: tuple[np.ndarray, ...]
     params: JointParameters
-    baseline_fit: ThermalFit
-    final_fit: ThermalFit
-    cv_blocks: int
-    explained: dict = dataclasses.field(default_factory=dict)  # accepted term -> tuple[RegimeGain]
-    skipped: tuple[str, ...] = ()
-    success: bool = True
-    status: str = "ok"
-    message: str = "diagnosis ran"
+    grids: tuple[ThermalGrid, ...]
+    success: bool
+    status: str
+    message: str
+    rows: Mapping[str, int] = dataclasses.field(default_factory=dict)  # the contract's rows: used, skipped, segments
+    regimes: tuple[np.ndarray, ...] = ()
+    selection: SubsetSelection | None = None
+    fits: Mapping[frozenset, ThermalFit] = dataclasses.field(default_factory=dict)
+    localisations: tuple[Localisation, Localisation] | None = None  # baseline, final
+    cv_rmse: tuple[float, float] | None = None                      # baseline, final
+    noise: Noise | None = None
+    not_determinable: tuple[dict, ...] = ()
+    cv_blocks: int = 3
+    hosted: frozenset = frozenset()  # in the final structure, not evidenced by the data (not named)
+
+    @property
+    def final_terms(self) -> frozenset:
+        return self.selection.chosen.terms if self.selection is not None else frozenset()
+
+    @property
+    def baseline_fit(self) -> ThermalFit | None:
+        return self.fits.get(frozenset())
+
+    @property
+    def final_fit(self) -> ThermalFit | None:
+        return self.fits.get(self.final_terms)
+
+    @property
+    def missing_physics(self) -> list[str]:
+        """The named terms: the chosen set without the terms it only hosts (see :func:`_hosted`)."""
+        return [t for t in THERMAL_TERMS if t in self.final_terms and t not in self.hosted]
+
+    @property
+    def explained(self) -> dict[str, tuple[RegimeGain, ...]]:
+        """Per named term: the baseline mismatch it removes (the final set against the final set without it)."""
+        if self.localisations is None:
+            return {}
+        return {t: regime_gains(self.fits[self.final_terms - {t}], self.final_fit, self.localisations[0])
+                for t in self.missing_physics if self.final_terms - {t} in self.fits}
 
     def parameter_file(self) -> dict | None:
-        if not self.final_fit.success:
+        if self.final_fit is None or not self.final_fit.success:
             return None
         return parameter_file(self.params, self.final_fit, self.recordings)
 
+    def term_report(self, term: str) -> dict:
+        """The contract's ``missing_physics`` entry of a named term."""
+        fit, test = self.final_fit, self.selection.term_tests[term]
+        without = self.fits[self.final_terms - {term}]
+        keys = [k for k in term_keys(term, canonical_terms("one_node", self.final_terms)) if k in fit.parameters]
+        collinear = sorted({c for k in keys for c in fit.collinear(k)})
+        where = "; ".join(str(g) for g in self.explained.get(term, ()) if g.gain > 0) or "no located mismatch"
+        evidence = (f"{structure_name(canonical_terms('one_node', self.final_terms - {term}))} -> {fit.model}: "
+                    f"RMSE {without.rmse:.3g} -> {fit.rmse:.3g} K (-{100 * test.rmse_drop:.0f}%), likelihood ratio "
+                    f"{test.statistic:.1f} on {test.df} df, p = {test.p_value:.2g} ({self.selection.n_tests} models "
+                    f"compared, effective samples n/tau = {test.large.n / test.large.tau:.0f}); explains {where}")
+        if term == "friction_heating":
+            evidence += "; " + self._friction_ratio(fit)
+        return {"term": term, "evidence": evidence,
+                "parameters": {k: float(fit.parameters[k]) for k in keys}, "rmse": fit.rmse,
+                "p_value": test.p_value, "effect_k": float(np.sqrt(np.mean((fit.fitted - without.fitted) ** 2))),
+                "ci95": {k: [float(v) for v in fit.confidence[k]] for k in keys if k in fit.confidence},
+                "collinear_with": collinear}
+
+    def _friction_ratio(self, fit: ThermalFit) -> str:
+        """Information only: the fitted friction heat against the file's friction power."""
+        m = self.params.motor
+        c1, c2 = (fit.parameters[k] for k in FRICTION_KEYS)
+        return (f"friction heat / the file's friction power: c1 / coulomb = {c1 / m.coulomb_friction_nm:.2f}, "
+                f"c2 / viscous = {c2 / m.viscous_friction_nm_s_per_rad:.2f} (information, not a bound)")
+
     def to_dict(self) -> dict:
-        sel = self.selection
-        missing = []
-        for a in sel.accepted:
-            fit = a.candidate.fit
-            keys = _TERM_PARAMETERS[a.term]
-            if a.term == "drive_heating" and "casing_node" not in self.missing_physics:
-                keys = _TERM_PARAMETERS["casing_node"] + keys
-            where = "; ".join(str(g) for g in self.explained.get(a.term, ()) if g.gain > 0)
-            missing.append({"term": a.term, "evidence": f"{a.evidence}; explained by regime: {where or 'none'}",
-                            "parameters": {k: float(fit.parameters[k]) for k in keys if k in fit.parameters},
-                            "rmse": fit.rmse})
-        return {"physics": "thermal", "recordings": list(self.recordings),
-                "baseline": sel.baseline.fit.summary(), "mismatches": sel.baseline_localisation.to_list(),
-                "missing_physics": missing, "final": sel.final.fit.summary(),
-                "validation": {"method": f"blocked cross-validation: {self.cv_blocks} contiguous segments per "
-                                         "recording, each predicted (open-loop simulation) by a fit that did not "
-                                         "see it (held-out RMSE)",
-                               "rmse_before": sel.baseline.cv_rmse, "rmse_after": sel.final.cv_rmse},
-                "unexplained": sel.final_localisation.to_list(),
-                "parameter_file": self.parameter_file()}
+        base, final = self.baseline_fit, self.final_fit
+        out = {"success": self.success, "status": self.status, "message": self.message, "physics": "thermal",
+               "recordings": list(self.recordings),
+               "rows": dict(self.rows),
+               "speed_source": {g.name: g.speed_source for g in self.grids},
+               "baseline": base.summary() if base is not None else None,
+               "mismatches": self.localisations[0].to_list() if self.localisations else [],
+               "missing_physics": [self.term_report(t) for t in self.missing_physics],
+               "not_determinable": list(self.not_determinable),
+               "final": final.summary() if final is not None else None,
+               "validation": None, "unexplained": self.localisations[1].to_list() if self.localisations else [],
+               "noise": dataclasses.asdict(self.noise) if self.noise is not None else None,
+               "parameter_file": self.parameter_file()}
+        if self.cv_rmse is not None:
+            out["validation"] = {"method": f"blocked cross-validation: {self.cv_blocks} contiguous segments per "
+                                           "recording, each predicted (open-loop simulation) by a fit that did not "
+                                           "see it (held-out RMSE)",
+                                 "rmse_before": self.cv_rmse[0], "rmse_after": self.cv_rmse[1]}
+        return out
 
     def report(self) -> str:
-        sel = self.selection
-        lines = [f"thermal diagnosis of {', '.join(self.recordings)}: {self.status} ({self.message})",
-                 f"baseline {sel.baseline.fit.model}: rmse {sel.baseline.fit.rmse:.4g} K, "
-                 f"{len(sel.baseline_localisation.mismatches)} mismatch intervals "
-                 f"({', '.join(sorted({m.regime for m in sel.baseline_localisation.mismatches})) or 'none'})"]
-        lines += [f"  {a.term}: {'ACCEPTED' if a.accepted else 'rejected'}: {a.evidence}" for a in sel.assessments]
-        lines += [f"  {term} explains: " + "; ".join(map(str, gains)) for term, gains in self.explained.items()]
-        lines += [f"  {term}: not tested ({why})" for term, why in (s.split(": ", 1) for s in self.skipped)]
-        lines += [f"final {sel.final.fit.model}: rmse {sel.final.fit.rmse:.4g} K; held-out rmse "
-                  f"{sel.baseline.cv_rmse:.4g} -> {sel.final.cv_rmse:.4g} K; "
-                  f"{len(sel.final_localisation.mismatches)} unexplained intervals", self.final_fit.fit_report()]
+        lines = [f"thermal diagnosis of {', '.join(self.recordings)}: {self.status} ({self.message})"]
+        if self.selection is None:
+            return "\n".join(lines + [f"  not determinable: {d['term']}: {d['reason']}" for d in self.not_determinable])
+        base, final = self.baseline_fit, self.final_fit
+        lines.append(f"baseline {base.model}: rmse {base.rmse:.4g} K, {len(self.localisations[0].mismatches)} "
+                     f"mismatch intervals ({', '.join(sorted({m.regime for m in self.localisations[0].mismatches})) or 'none'})")
+        for f in sorted(self.selection.fits, key=lambda f: (len(f.terms), f.rss)):
+            mark = "CHOSEN" if f is self.selection.chosen else ("" if f.admissible else f.reason)
+            lines.append(f"  {self.fits[f.terms].model:<55s} rmse {f.rmse:.4g} K, tau {f.tau:.1f}  {mark}")
+        lines += [f"  {t}: {self.term_report(t)['evidence']}" for t in self.missing_physics]
+        lines += [f"  not determinable: {d['term']}: {d['reason']}" for d in self.not_determinable]
+        lines += [f"final {final.model}: rmse {final.rmse:.4g} K = {self.noise.rmse_ratio:.2f} x noise "
+                  f"({self.noise.total_c:.3g} K); held-out rmse {self.cv_rmse[0]:.4g} -> {self.cv_rmse[1]:.4g} K; "
+                  f"{len(self.localisations[1].mismatches)} unexplained intervals", final.fit_report()]
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 3) -> Path:
         """Measured, baseline and final sensor temperature; residuals with mismatch intervals shaded;
         current and speed."""
-
-        sel, path = self.selection, Path(path)
+        path, base, final = Path(path), self.baseline_fit, self.final_fit
         grids = self.grids[:max_recordings]
         fig, axes = new_figure(3, len(grids), figsize=(9 * len(grids), 9), sharex="col", squeeze=False)
         for c, grid in enumerate(grids):
-            rows, t, ax = self.baseline_fit.rows(grid.name), grid.time_s, axes[:, c]
-            ax[0].plot(t, grid.measured_c, "k.", ms=1.5, label="recorded (casing sensor)")
-            ax[0].plot(t, sel.baseline.fit.fitted[rows], lw=1.0, label=f"baseline {sel.baseline.fit.model}")
-            ax[0].plot(t, sel.final.fit.fitted[rows], lw=1.0, label=f"final {sel.final.fit.model}")
-            ax[1].plot(t, sel.baseline.fit.residuals[rows], lw=0.6, label=f"baseline, rmse {sel.baseline.fit.rmse:.3g} K")
-            ax[1].plot(t, sel.final.fit.residuals[rows], lw=0.6, label=f"final, rmse {sel.final.fit.rmse:.3g} K")
-            for loc, color in ((sel.baseline_localisation, "red"), (sel.final_localisation, "grey")):
+            t, ax = grid.time_s, axes[:, c]
+            ax[0].plot(t, grid.measured_c, "k.", ms=1.5, label="recorded (sensor)")
+            for fit, name in ((base, "baseline"), (final, "final")):
+                if fit is not None:
+                    rows = fit.rows(grid.name)
+                    ax[0].plot(t, fit.fitted[rows], lw=1.0, label=f"{name} {fit.model}")
+                    ax[1].plot(t, fit.residuals[rows], lw=0.6, label=f"{name}, rmse {fit.rmse:.3g} K")
+            for loc, color in zip(self.localisations or (), ("red", "grey")):
                 for m in loc.mismatches:
                     if m.recording == grid.name:
                         ax[1].axvspan(m.start_s, m.end_s, color=color, alpha=0.2, lw=0)
                         ax[1].text(0.5 * (m.start_s + m.end_s), 0, m.regime, fontsize=7, ha="center", color=color)
             ax[2].plot(t, np.sqrt(held_window_mean(grid, 1, 30.0)), lw=0.8, label="RMS current over 60 s [A]")
-            ax[2].plot(t, np.sqrt(held_window_mean(grid, 3, 30.0)), lw=0.8, label="RMS speed over 60 s [rad/s]")
-            ax[0].set(title=grid.name, ylabel="temperature [°C]")
+            ax[2].plot(t, np.sqrt(held_window_mean(grid, 3, 30.0)), lw=0.8,
+                       label=f"RMS speed over 60 s [rad/s] (from {grid.speed_source})")
+            ax[0].set(title=f"{grid.name}: {self.status}", ylabel="temperature [°C]")
             ax[1].set(ylabel="residual [K] (red: mismatch, grey: unexplained)")
             ax[2].set(xlabel="time [s]")
             for a in ax:
@@ -310,57 +453,116 @@ class ThermalDiagnosis(SelectedTerms):
         return path
 
 
-def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) -> tuple[list[str], list[str]]:
+def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) -> tuple[list[str], list[dict]]:
     usable, skipped = [], []
     moving = any(g.has_velocity and np.any(np.abs(g.velocity) > 0.05) for g in grids)
     for term in candidates:
         require(term in THERMAL_TERMS, "diagnose", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
         if term in ("friction_heating", "iron_losses") and not moving:
-            skipped.append(f"{term}: no recording has a velocity (or position) showing motion")
+            skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
+                            "experiment": EXPERIMENTS[term]})
         else:
             usable.append(term)
     return usable, skipped
+
+
+def _too_short(grids: Sequence[ThermalGrid], settings: ThermalDiagnosisSettings) -> str:
+    count, span = sum(len(g) for g in grids), max((float(g.time_s[-1] - g.time_s[0]) for g in grids), default=0.0)
+    if count < settings.min_samples or span < settings.min_span_s:
+        return (f"{', '.join(g.name for g in grids)}: {count} samples on the {settings.fit.min_step_s:g} s grid, "
+                f"longest stretch {span:.0f} s; a diagnosis needs at least {settings.min_samples} samples and a "
+                f"stretch of {settings.min_span_s:g} s (thermal time constants are minutes)")
+    return ""
+
+
+def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFit]) -> list[dict]:
+    """What these data cannot tell apart: equally good term sets, and named terms whose parameters
+    are not identifiable."""
+    out, chosen = [], selection.chosen
+    for other in selection.equivalent:
+        for term in sorted(other.terms ^ chosen.terms):
+            out.append({"term": term, "reason": f"{fits[other.terms].model} fits as well as {fits[chosen.terms].model} "
+                                                f"(RMSE {other.rmse:.3g} vs {chosen.rmse:.3g} K)",
+                        "experiment": EXPERIMENTS[term]})
+    final = fits[chosen.terms]
+    for term in sorted(chosen.terms):
+        loose = [k for k in term_keys(term, canonical_terms("one_node", chosen.terms))
+                 if k in final.stderr and not final.identifiable(k)]
+        if loose:
+            partners = sorted({c for k in loose for c in final.collinear(k)})
+            out.append({"term": term, "reason": f"needed, but {', '.join(loose)} not identifiable from these data"
+                                                + (f" (collinear with {', '.join(partners)})" if partners else ""),
+                        "experiment": EXPERIMENTS[term]})
+    return out
+
+
+def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, list[dict]]:
+    """A casing node whose winding time constant C_w R_wc is shorter than the grid's step is not
+    evidenced: the data cannot resolve it.  It stays in the structure when the drive node needs it (the
+    contract's drive node sits on the casing) but is not named."""
+    p = fit.parameters
+    if "casing_node" not in fit.terms:
+        return frozenset(), []
+    tau_s = p["winding_capacity_j_per_k"] * p["winding_casing_k_per_w"]
+    step_s = float(np.median(np.concatenate([np.diff(g.time_s) for g in grids])))
+    if tau_s >= step_s:
+        return frozenset(), []
+    return frozenset({"casing_node"}), [{
+        "term": "casing_node", "experiment": EXPERIMENTS["casing_node"],
+        "reason": f"fitted winding time constant C_w R_wc = {tau_s:.1f} s, below the {step_s:.0f} s step of the "
+                  "data: no casing node is evidenced (kept in the structure only to host the drive node)"}]
 
 
 def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | None = None,
                      candidates: Sequence[str] = CANDIDATE_TERMS,
                      settings: ThermalDiagnosisSettings | None = None) -> ThermalDiagnosis:
     """Diagnose recordings (``current_a`` + ``temperature_c``; ``velocity`` or ``position`` for the
-    speed-dependent terms; ``ambient_c`` if logged) against the one-node baseline."""
+    speed-dependent terms; ``ambient_c`` if logged) against the one-node baseline (module docstring)."""
     settings = settings or ThermalDiagnosisSettings()
     params = load_joint_parameters(parameters)
     recs = as_recordings(recordings, "thermal")
-    grids = tuple(thermal_grid(r, params, settings.fit) for r in recs)
-    for g in grids:
-        if len(g) < 4 * settings.cv_blocks:
-            raise InputError(g.name, "time_s", f"{len(g)} samples on the {settings.fit.min_step_s:g} s grid",
-                             f"too short for {settings.cv_blocks}-block cross-validation")
+    for rec in recs:
+        rec.require("current_a", "temperature_c")
+    split = [split_at_gaps(r) for r in recs]
+    grids = tuple(thermal_grid(part, params, settings.fit) for parts, _ in split for part in parts)
+    names = tuple(r.name for r in recs)
+    rows = {"used": sum(len(p) for parts, _ in split for p in parts), "skipped": sum(n for _, n in split),
+            "segments": len(grids)}
+    short = _too_short(grids, settings)
+    if short:
+        return ThermalDiagnosis(names, params, grids, False, "insufficient_data", short, rows=rows,
+                                cv_blocks=settings.cv_blocks)
     usable, skipped = _usable_candidates(candidates, grids)
     regimes = tuple(thermal_regimes(g, settings.regimes) for g in grids)
     specs = term_specs(params)
     hide = None if settings.progress is None else not settings.progress
     with tqdm(desc="thermal diagnosis fits", unit="fit", disable=hide) as bar:
-        fitter = _Fitter(params, grids, settings, list(specs.values()), bar)
-
-        def locate(mf: ModelFit) -> Localisation:
-            series, start = [], 0
-            for g, labels in zip(grids, regimes):
-                series.append(ResidualSeries(g.name, g.time_s, mf.fit.residuals[start:start + len(g)], labels))
-                start += len(g)
-            return locate_thermal(series, settings.localise)
-
-        selection = forward_select(fitter, locate, (), [specs[t] for t in usable], [specs["one_node"]],
-                                   settings.selection)
-    explained, current = {}, selection.baseline
-    for a in selection.accepted:
-        explained[a.term] = regime_gains(current, a.candidate, locate(current))
-        current = a.candidate
-    baseline_fit = fitter.thermal_fit(selection.baseline.terms)
-    final_fit = fitter.thermal_fit(selection.final.terms)
-    ok = baseline_fit.success and final_fit.success
-    return ThermalDiagnosis(tuple(g.name for g in grids), selection, grids, regimes, params, baseline_fit, final_fit,
-                            settings.cv_blocks, explained, tuple(skipped), ok, "ok" if ok else final_fit.status,
-                            "diagnosis ran" if ok else f"final fit failed: {final_fit.message}")
+        fitter = _Fitter(params, grids, settings, specs, bar)
+        sets = [frozenset(c) for k in range(len(usable) + 1) for c in itertools.combinations(usable, k)]
+        for terms in sets:
+            fitter.fit(terms)
+        selection = subset_select([fitter.subset(t) for t in sets], settings.selection)
+        cv = None
+        if selection is not None:
+            fitter.polish(selection.chosen.terms)
+            cv = (fitter.cv_rmse(frozenset()), fitter.cv_rmse(selection.chosen.terms))
+    fits = dict(fitter.fits)
+    if selection is None:
+        return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
+                                "no candidate model converged within physical bounds", rows, regimes, None, fits,
+                                not_determinable=tuple(skipped), cv_blocks=settings.cv_blocks)
+    final = fits[selection.chosen.terms]
+    locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[frozenset()], final))
+    noise = _noise(final, grids, settings.localise.noise_window_s)
+    fitting = noise.rmse_ratio <= settings.max_noise_ratio
+    message = (f"{final.model}: rmse {final.rmse:.3g} K = {noise.rmse_ratio:.2f} x the residual noise "
+               f"{noise.total_c:.3g} K" + ("" if fitting else f" (> {settings.max_noise_ratio:g}): no candidate "
+                                           "explains these recordings"))
+    hosted, unresolved = _hosted(final, grids)
+    return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
+                            rows, regimes, selection, fits, locs, cv, noise,
+                            tuple(skipped) + tuple(unresolved) + tuple(_undetermined(selection, fits)),
+                            settings.cv_blocks, hosted)
 
 
 def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,
@@ -376,5 +578,5 @@ def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None 
     return diagnosis.to_dict() | {"rows": recordings.rows}
 
 
-__all__ = ["CANDIDATE_TERMS", "ThermalDiagnosis", "ThermalDiagnosisSettings", "diagnose_thermal",
-           "diagnose_thermal_files", "iron_max", "term_specs"]
+__all__ = ["CANDIDATE_TERMS", "EXPERIMENTS", "ThermalDiagnosis", "ThermalDiagnosisSettings", "diagnose_thermal",
+           "diagnose_thermal_files", "iron_max", "term_keys", "term_specs"]

@@ -119,21 +119,38 @@ def result_from_jacobian(model: str, names: Sequence[str], values: Sequence[floa
     residuals = np.asarray(residuals, dtype=float)
     jacobian = np.asarray(jacobian, dtype=float).reshape(residuals.size, len(names))
     n, p = jacobian.shape
-    scale = np.linalg.norm(jacobian, axis=0)
-    scale[scale == 0] = 1.0
-    u, sing, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
-    rank = int(np.sum(sing > sing.max(initial=0.0) * max(n, p) * np.finfo(float).eps * 1e3)) if sing.size else 0
+    cov, rank = covariance(jacobian, residuals)
     parameters = {k: float(v) for k, v in zip(names, values)}
     parameters.update({k: float(v) for k, v in (extra or {}).items()})
     if rank < p or n <= p:
         why = f"rank {rank} < {p} parameters" if rank < p else f"{n} samples for {p} parameters"
         return FitResult(model, parameters, {}, residuals, np.asarray(fitted, float), False, "rank_deficient",
                          f"parameters not identifiable from these data ({why})", time_s, dict(units or {}), tuple(notes))
-    s2 = float(residuals @ residuals) / (n - p)
-    cov = (vt.T / sing ** 2) @ vt / np.outer(scale, scale) * s2
     stderr = {k: float(math.sqrt(max(cov[i, i], 0.0))) for i, k in enumerate(names)}
     return FitResult(model, parameters, stderr, residuals, np.asarray(fitted, float), True, status, message,
                      time_s, dict(units or {}), tuple(notes))
+
+
+def covariance(jacobian: np.ndarray, residuals: np.ndarray, floor: float = 1e-9) -> tuple[np.ndarray, int]:
+    """``s^2 (J^T J)^-1`` (columns scaled to unit norm) and the numerical rank of ``J``.  Singular values
+    below ``floor`` times the largest are raised to it, so a rank-deficient Jacobian gives huge but finite
+    variances along its null space (the correlations then name the collinear parameters)."""
+    n, p = jacobian.shape
+    scale = np.linalg.norm(jacobian, axis=0)
+    scale[scale == 0] = 1.0
+    _, sing, vt = np.linalg.svd(jacobian / scale, full_matrices=False)
+    if not sing.size or sing.max() == 0:
+        return np.zeros((p, p)), 0
+    rank = int(np.sum(sing > sing.max() * max(n, p) * np.finfo(float).eps * 1e3))
+    sing = np.maximum(sing, floor * sing.max())
+    s2 = float(residuals @ residuals) / max(n - p, 1)
+    return (vt.T / sing ** 2) @ vt / np.outer(scale, scale) * s2, rank
+
+
+def correlation(cov: np.ndarray) -> np.ndarray:
+    """Correlation matrix of a covariance matrix."""
+    sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return cov / np.outer(sd, sd)
 
 
 def linear_fit(X: np.ndarray, y: np.ndarray, names: Sequence[str], *, model: str | None = None,

@@ -7,10 +7,13 @@ differentiates the same expressions the planner integrates.  Structures (``terms
 - ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
 - ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing
   capacities, ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
-- ``drive_heating`` -> ``two_node_drive``: a drive node coupled to the casing and to ambient, heated
-  by ``drive_idle_w + drive_loss_w_per_a2 i^2``; it implies the casing node (the drive heats the casing);
-- ``friction_heating``: ``friction_heating_fraction`` of the friction power tau_f(v) v (friction model
-  of the parameter file) heats the sensor node (one_node) or the casing;
+- ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (both free, >= 0) on the
+  sensor node of a one-node network (the contract's drive heat without a drive node); with the casing
+  node, a drive node (``two_node_drive``) coupled to the casing and to ambient, heated by the idle loss;
+- ``friction_heating``: free heat ``c1 |v| + c2 v^2`` (``friction_heat_linear_w_s_per_rad``,
+  ``friction_heat_quadratic_w_s2_per_rad2``, joint-side v, both >= 0), in the winding of a one-node
+  network and in the casing otherwise (gearbox and bearings sit on the housing); not tied to the
+  friction of [motor] (gearbox heat may be several times the identified joint friction);
 - ``copper_resistance``: ``copper_alpha_per_k`` free (eq. 3);
 - ``iron_losses``: ``iron_loss_w_s2_per_rad2`` k, a speed-dependent loss k v^2 (joint-side v) in the
   winding node: the contract's iron loss with ``iron_loss_w`` = k at 1 rad/s and exponent 2.
@@ -59,7 +62,7 @@ from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, T
                                 packaged_parameter_file, parameters_from_dict, unit)
 from ..recordings import as_recordings, read_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
-from .fit_report import Z95, FitResult, integrated_autocorrelation, result_from_jacobian
+from .fit_report import Z95, FitResult, correlation, covariance, integrated_autocorrelation
 from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
@@ -70,11 +73,13 @@ IRON_KEY = "iron_loss_w_s2_per_rad2"
 # The iron_losses term k v^2 is the contract's iron loss at 1 rad/s with exponent 2: iron_loss_w = k.
 _IRON_CONTRACT = {"iron_loss_ref_speed_rad_s": 1.0, "iron_loss_speed_exponent": 2.0}
 
-_TERM_KEYS = {"friction_heating": ("friction_heating_fraction",), "copper_resistance": ("copper_alpha_per_k",),
+FRICTION_KEYS = ("friction_heat_linear_w_s_per_rad", "friction_heat_quadratic_w_s2_per_rad2")
+SENSOR_DRIVE_KEYS = ("drive_idle_w", "drive_loss_w_per_a2")
+_TERM_KEYS = {"friction_heating": FRICTION_KEYS, "copper_resistance": ("copper_alpha_per_k",),
               "iron_losses": (IRON_KEY,)}
 # Optional [thermal] keys a term decides (absent term: default); the file's other optional keys are kept.
 _TERM_OWNED = ("friction_heating_fraction", "iron_loss_w", *_IRON_CONTRACT)
-UNITS = {k: unit(k) for k in {*(k for keys in THERMAL_KEYS.values() for k in keys), "friction_heating_fraction",
+UNITS = {k: unit(k) for k in {*(k for keys in THERMAL_KEYS.values() for k in keys), *FRICTION_KEYS,
                               "copper_alpha_per_k"}} | {IRON_KEY: "W s^2/rad^2"}
 # Search bounds of the optimiser (wide, technical; the diagnosis checks narrower physical ranges).
 # "log": fitted as log(value); "lin": fitted as value / scale.
@@ -84,7 +89,9 @@ _SEARCH = {
     "resistance_k_per_w": ("log", 1e-3, 100.0), "winding_casing_k_per_w": ("log", 1e-3, 100.0),
     "casing_ambient_k_per_w": ("log", 1e-3, 100.0), "drive_casing_k_per_w": ("log", 1e-3, 100.0),
     "drive_ambient_k_per_w": ("log", 1e-3, 1000.0), "drive_idle_w": ("log", 1e-3, 300.0),
-    "drive_loss_w_per_a2": ("lin", 0.0, 5.0, 0.1), "friction_heating_fraction": ("lin", 0.0, 1.0, 1.0),
+    "drive_loss_w_per_a2": ("lin", 0.0, 5.0, 0.1),
+    "friction_heat_linear_w_s_per_rad": ("lin", 0.0, 200.0, 1.0),
+    "friction_heat_quadratic_w_s2_per_rad2": ("lin", 0.0, 200.0, 1.0),
     "copper_alpha_per_k": ("lin", 0.0, 0.02, 0.004), IRON_KEY: ("lin", 0.0, 10.0, 0.1),
 }
 _OFFSET_SCALE_C = 1.0
@@ -94,7 +101,7 @@ DRIVE_FIXED = ("drive_ambient_k_per_w", "drive_loss_w_per_a2")
 _FALLBACK = {"winding_capacity_j_per_k": 40.0, "casing_capacity_j_per_k": 1200.0, "winding_casing_k_per_w": 0.9,
              "casing_ambient_k_per_w": 1.3, "drive_capacity_j_per_k": 300.0, "drive_casing_k_per_w": 0.6,
              "drive_ambient_k_per_w": 2.5, "drive_idle_w": 23.0, "drive_loss_w_per_a2": 0.1,
-             "friction_heating_fraction": 0.5, IRON_KEY: 0.02}
+             IRON_KEY: 0.02}
 _STATUS = {-1: "improper_input", 0: "max_iterations", 1: "converged_gtol", 2: "converged_ftol",
            3: "converged_xtol", 4: "converged_ftol_xtol"}
 
@@ -105,27 +112,30 @@ def canonical_terms(model: str = "one_node", terms: Sequence[str] = ()) -> tuple
     require(model in MODELS, "thermal model", "model", model, f"expected one of {', '.join(MODELS)}")
     for term in terms:
         require(term in THERMAL_TERMS, "thermal model", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
-    implied = {"one_node": (), "two_node": ("casing_node",), "two_node_drive": ("drive_heating",)}[model]
+    implied = {"one_node": (), "two_node": ("casing_node",), "two_node_drive": ("casing_node", "drive_heating")}[model]
     chosen = set(terms) | set(implied)
     return tuple(t for t in THERMAL_TERMS if t in chosen)
 
 
 def network_model(terms: Sequence[str]) -> str:
-    """Contract thermal model of a term set: drive_heating implies the casing node."""
-    if "drive_heating" in terms:
-        return "two_node_drive"
-    return "two_node" if "casing_node" in terms else "one_node"
+    """Contract thermal model of a term set: the casing node makes two nodes, the drive then a third."""
+    if "casing_node" not in terms:
+        return "one_node"
+    return "two_node_drive" if "drive_heating" in terms else "two_node"
 
 
 def structure_name(terms: Sequence[str]) -> str:
-    """E.g. ``two_node_drive + friction_heating``."""
+    """E.g. ``two_node_drive + friction_heating`` or ``one_node + drive_heating``."""
     model = network_model(terms)
-    extra = [t for t in terms if t not in ("casing_node", "drive_heating")]
-    return " + ".join([model] + extra)
+    implied = {"one_node": (), "two_node": ("casing_node",), "two_node_drive": ("casing_node", "drive_heating")}[model]
+    return " + ".join([model] + [t for t in terms if t not in implied])
 
 
 def free_keys(terms: Sequence[str]) -> tuple[str, ...]:
-    keys = THERMAL_KEYS[network_model(terms)]
+    model = network_model(terms)
+    keys = THERMAL_KEYS[model]
+    if model == "one_node" and "drive_heating" in terms:
+        keys += SENSOR_DRIVE_KEYS
     for term in THERMAL_TERMS:
         if term in terms:
             keys += _TERM_KEYS.get(term, ())
@@ -146,12 +156,15 @@ def structure_parameters(th: ThermalParameters, model: str, values: Mapping[str,
     kept = {k: v for k, v in th.values.items()
             if k not in THERMAL_KEYS[th.model] and k not in _TERM_OWNED and k not in THERMAL_KEYS[model]}
     own = {k: values[k] for k in THERMAL_KEYS[model]}
-    own["friction_heating_fraction"] = values.get("friction_heating_fraction", 0.0)
+    own |= {k: values[k] for k in SENSOR_DRIVE_KEYS if model == "one_node" and k in values}
+    own["friction_heating_fraction"] = 0.0
+    own |= {k: values[k] for k in FRICTION_KEYS if k in values}
     if IRON_KEY in values:
         own |= {"iron_loss_w": values[IRON_KEY], **_IRON_CONTRACT}
     if model == "one_node":  # a one-node network has only the winding
         return dataclasses.replace(th, model=model, values=kept | own, sensor=None, friction_heat_node=None)
-    return dataclasses.replace(th, model=model, values=kept | own)
+    friction_node = "casing" if FRICTION_KEYS[0] in values else th.friction_heat_node
+    return dataclasses.replace(th, model=model, values=kept | own, friction_heat_node=friction_node)
 
 
 def start_values(params: JointParameters, terms: Sequence[str],
@@ -159,7 +172,11 @@ def start_values(params: JointParameters, terms: Sequence[str],
     """Start values of the free parameters: a previous fit's where it has them (a one-node fit is
     split in the file's winding/casing proportions), else the parameter file's, else class values."""
     th = params.thermal
-    file_values = dict(th.values) | {"copper_alpha_per_k": params.motor.copper_alpha_per_k}
+    m = params.motor
+    # friction heat starts at the file's friction power (c1 = Coulomb, c2 = viscous), drive heat at class values
+    file_values = ({"friction_heat_linear_w_s_per_rad": m.coulomb_friction_nm,
+                    "friction_heat_quadratic_w_s2_per_rad2": m.viscous_friction_nm_s_per_rad}
+                   | {k: v for k, v in th.values.items() if v} | {"copper_alpha_per_k": m.copper_alpha_per_k})
     cap, res = lumped(th)
     file_values.setdefault("capacity_j_per_k", cap)
     file_values.setdefault("resistance_k_per_w", res)
@@ -176,8 +193,6 @@ def start_values(params: JointParameters, terms: Sequence[str],
     out = {}
     for key in free_keys(terms):
         value = file_values.get(key, _FALLBACK.get(key))
-        if key == "friction_heating_fraction" and not value:
-            value = _FALLBACK[key]
         kind, lo, hi = _SEARCH[key][:3]
         span = hi - lo
         out[key] = float(np.clip(value, lo + 1e-6 * span if kind == "lin" else lo * 1.001, hi - 1e-6 * span))
@@ -272,6 +287,18 @@ class ThermalFit(FitResult):
     nodes: tuple[str, ...] = ()
     node_temperatures_c: tuple[np.ndarray, ...] = ()  # per recording, nodes x samples
     nfev: int = 0
+    correlation: Mapping[str, Mapping[str, float]] = dataclasses.field(default_factory=dict)
+    rank_deficient: bool = False  # some parameter combination is not identifiable (see ``correlation``)
+
+    def collinear(self, key: str, threshold: float = 0.95) -> tuple[str, ...]:
+        """Other free parameters whose estimate is correlated with ``key``'s beyond ``threshold``."""
+        row = self.correlation.get(key, {})
+        return tuple(k for k, r in row.items() if k != key and abs(r) >= threshold)
+
+    def identifiable(self, key: str, max_relative_error: float = 0.5) -> bool:
+        """Whether the data pin ``key`` down: a finite standard error below ``max_relative_error`` of its value."""
+        err, value = self.stderr.get(key), self.parameters.get(key, 0.0)
+        return err is not None and value != 0 and err < max_relative_error * abs(value)
 
     @property
     def network_model(self) -> str:
@@ -320,9 +347,16 @@ def _from_theta(keys: Sequence[str], theta: np.ndarray) -> tuple[np.ndarray, np.
     return values, deriv
 
 
-def _theta_bounds(keys: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    lo = [math.log(_SEARCH[k][1]) if _SEARCH[k][0] == "log" else _SEARCH[k][1] / _SEARCH[k][3] for k in keys]
-    hi = [math.log(_SEARCH[k][2]) if _SEARCH[k][0] == "log" else _SEARCH[k][2] / _SEARCH[k][3] for k in keys]
+def _theta_bounds(keys: Sequence[str], bounds: Mapping[str, tuple[float, float]] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Optimiser bounds of theta: the technical search range, narrowed to ``bounds`` (physical ranges)."""
+    lo, hi = [], []
+    for k in keys:
+        kind, a, b = _SEARCH[k][:3]
+        narrow = (bounds or {}).get(k, (a, b))
+        a, b = max(a, narrow[0]), min(b, narrow[1])
+        lo.append(math.log(a) if kind == "log" else a / _SEARCH[k][3])
+        hi.append(math.log(b) if kind == "log" else b / _SEARCH[k][3])
     return np.array(lo), np.array(hi)
 
 
@@ -383,12 +417,14 @@ def head_offset(model: ThermalModel, grid: ThermalGrid, values: Sequence[float],
 
 def fit_grids(model: ThermalModel, grids: Sequence[ThermalGrid], *, start: Mapping[str, float] | None = None,
               offsets: Sequence[float] | None = None, weights: Sequence[np.ndarray] | None = None,
-              settings: ThermalSettings | None = None) -> ThermalFit:
+              settings: ThermalSettings | None = None, bounds: Mapping[str, tuple[float, float]] | None = None
+              ) -> ThermalFit:
     """Output-error fit of ``model`` to ``grids`` (shared parameters, one initial offset per grid).
 
     ``weights`` (per grid, per kept sample; 0 = unseen) select the samples the cost sees; residuals
     and fitted values are returned for every sample.  A grid whose weights are all 0 gets its
-    initial offset from its first measurements (:func:`head_offset`), not from the fit.
+    initial offset from its first measurements (:func:`head_offset`), not from the fit.  ``bounds``
+    narrows the search range of named parameters (physical ranges; the start is clipped into them).
     """
     settings = settings or ThermalSettings()
     start = dict(start or start_values(model.params, model.terms))
@@ -398,7 +434,7 @@ def fit_grids(model: ThermalModel, grids: Sequence[ThermalGrid], *, start: Mappi
     if offsets is None:
         offsets = [head_offset(model, g, vals0, settings.head_s) for g in grids]
     theta0 = np.concatenate([_to_theta(keys, start), np.asarray(offsets, float) / _OFFSET_SCALE_C])
-    lo, hi = _theta_bounds(keys)
+    lo, hi = _theta_bounds(keys, bounds)
     unseen = [r for r, w in enumerate(weights) if not np.any(w)]
     lo = np.concatenate([lo, np.full(len(grids), -np.inf)])
     hi = np.concatenate([hi, np.full(len(grids), np.inf)])
@@ -444,8 +480,6 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
     fitted = np.concatenate([s[1] for s in sims])
     measured = np.concatenate([g.measured_c for g in grids])
     residuals = measured - fitted
-    w = np.concatenate(weights)
-    used = w > 0
     rows, jacs = [], []
     for r, (g, s, w_r) in enumerate(zip(grids, sims, weights)):
         res_r, j_r = _weighted_rows(model, g, s, w_r)
@@ -457,17 +491,14 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
     names = list(keys) + [f"initial_offset_c[{g.name}]" for g in grids]
     seen_cols = [True] * p + [bool(np.any(w_r)) for w_r in weights]
     names = [n for n, s in zip(names, seen_cols) if s]
-    full_values = np.concatenate([values, offsets])[seen_cols]
-    base = result_from_jacobian(model.name, names, full_values, np.concatenate(rows),
-                                np.vstack(jacs)[:, seen_cols], fitted=fitted[used], units=UNITS)
+    cov, rank = covariance(np.vstack(jacs)[:, seen_cols], np.concatenate(rows))
     parameters = {k: float(v) for k, v in zip(keys, values)} | model.fixed
     inflation = math.sqrt(max(integrated_autocorrelation(r_g[w_g > 0]) for r_g, w_g in
                               zip(np.split(residuals, np.cumsum([len(g) for g in grids])[:-1]), weights)
                               if np.any(w_g > 0)))
-    stderr = {k: inflation * base.stderr[k] for k in keys if k in base.stderr}
-    ok = bool(success) and base.success and bool(np.all(np.isfinite(residuals)))
-    if success and not base.success:
-        status, message = base.status, base.message
+    stderr = {k: inflation * math.sqrt(max(cov[i, i], 0.0)) for i, k in enumerate(keys)}
+    corr = correlation(cov[:p, :p])
+    ok = bool(success) and bool(np.all(np.isfinite(residuals)))
     notes = (f"standard errors inflated x{inflation:.2f} = sqrt(integrated autocorrelation time of the residual) "
              "for autocorrelated output-error residuals; still linearised, local intervals",
              "initial offsets [K]: " + ", ".join(f"{g.name} {o:+.3f}" for g, o in zip(grids, offsets)))
@@ -481,7 +512,9 @@ def _result(model: ThermalModel, grids, theta, weights, status, success, message
                       sample_counts=tuple(len(g) for g in grids),
                       initial_offset_c={g.name: float(o) for g, o in zip(grids, offsets)},
                       stderr_inflation=inflation, nodes=model.nodes,
-                      node_temperatures_c=tuple(s[0] for s in sims), nfev=nfev)
+                      node_temperatures_c=tuple(s[0] for s in sims), nfev=nfev,
+                      correlation={a: {b: float(corr[i, j]) for j, b in enumerate(keys)} for i, a in enumerate(keys)},
+                      rank_deficient=rank < len(names))
 
 
 def _thermometry_notes(model: ThermalModel, grids, sims) -> tuple[str, ...]:
@@ -506,7 +539,7 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
 def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
     """Keys held at the parameter file's values by default: with only the casing measured, the drive's
     path to ambient and its current-dependent loss trade off against its idle heat and coupling."""
-    return DRIVE_FIXED if "drive_heating" in terms else ()
+    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else ()
 
 
 def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),
@@ -540,7 +573,8 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()
     if "copper_alpha_per_k" in values:
         data["motor"]["copper_alpha_per_k"] = values["copper_alpha_per_k"]
-    identified = [*THERMAL_KEYS[model], *(k for k in ("friction_heating_fraction", "copper_alpha_per_k") if k in values)]
+    identified = [*THERMAL_KEYS[model], *(k for k in (*SENSOR_DRIVE_KEYS, *FRICTION_KEYS, "copper_alpha_per_k")
+                                          if k in values and k not in THERMAL_KEYS[model])]
     if IRON_KEY in values:
         identified += ["iron_loss_w", *_IRON_CONTRACT]
     where = ", ".join(recordings) or "recordings"

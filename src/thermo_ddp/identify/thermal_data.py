@@ -75,6 +75,7 @@ class ThermalGrid:
     has_ambient: bool
     winding_c: np.ndarray | None = None       # resistance thermometry at the kept samples (NaN: unusable)
     winding_weight: np.ndarray | None = None  # sensor_noise_c / its standard deviation (0: unusable)
+    speed_source: str = "none"  # "velocity" (recorded), "position differences" or "none"
 
     @property
     def thermometry_samples(self) -> int:
@@ -84,12 +85,14 @@ class ThermalGrid:
         return int(self.time_s.size)
 
 
-def _velocity(rec: Recording) -> np.ndarray | None:
+def _velocity(rec: Recording) -> tuple[np.ndarray | None, str]:
+    """The speed regressor and where it comes from: the recorded velocity when there is one (position
+    differences at 1 Hz alias a 2.5 s curl and bias the speed-driven heat), else position differences."""
     if rec.velocity is not None:
-        return np.asarray(rec.velocity, float)
+        return np.asarray(rec.velocity, float), "velocity"
     if rec.position is not None and len(rec) > 2:
-        return np.gradient(np.asarray(rec.position, float), rec.time_s)
-    return None
+        return np.gradient(np.asarray(rec.position, float), rec.time_s), "position differences"
+    return None, "none"
 
 
 def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSettings | None = None) -> ThermalGrid:
@@ -101,7 +104,7 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
         raise InputError(src, "time_s", f"{len(rec)} samples", "a thermal fit needs at least 3 samples")
     t = np.asarray(rec.time_s, float)
     current = np.asarray(rec.current_a, float)
-    velocity = _velocity(rec)
+    velocity, speed_source = _velocity(rec)
     v = np.zeros_like(t) if velocity is None else velocity
     drivers = np.array(_drivers(params)(current[None, :], v[None, :]))
     ambient = np.full_like(t, params.thermal.ambient_c) if rec.ambient_c is None else np.asarray(rec.ambient_c, float)
@@ -115,7 +118,32 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
     thermometry = _thermometry(rec, params, settings, v, keep) if settings.voltage_thermometry else (None, None)
     return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
-                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry)
+                       inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry,
+                       speed_source=speed_source)
+
+
+def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,
+                  min_samples: int = 12) -> tuple[list[Recording], int]:
+    """The stretches of ``rec`` between gaps longer than ``factor`` median steps and ``min_gap_s`` (what
+    heated the motor during a gap is unknown: each stretch starts from its own first measurement, as
+    the contract's ``split_gaps_s``), and the number of samples in stretches shorter than ``min_samples``
+    (left out).  Stretches are named ``name[k]`` when there is more than one."""
+    t = np.asarray(rec.time_s, float)
+    if t.size < 3:
+        return [rec], 0
+    dt = np.diff(t)
+    cuts = np.flatnonzero(dt > max(factor * float(np.median(dt)), min_gap_s)) + 1
+    if not cuts.size:
+        return [rec], 0
+    parts, skipped = [], 0
+    for k, (a, b) in enumerate(zip(np.concatenate(([0], cuts)), np.concatenate((cuts, [t.size])))):
+        if b - a < min_samples:
+            skipped += int(b - a)
+            continue
+        columns = {f.name: getattr(rec, f.name)[a:b] for f in dataclasses.fields(rec)
+                   if isinstance(getattr(rec, f.name), np.ndarray)}
+        parts.append(dataclasses.replace(rec, name=f"{rec.name}[{k}]", row_offset=rec.row_offset + int(a), **columns))
+    return parts, skipped
 
 
 def _thermometry(rec: Recording, params: JointParameters, settings: "ThermalSettings", velocity: np.ndarray,
