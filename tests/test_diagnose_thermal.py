@@ -171,3 +171,18 @@ def test_physical_bounds_and_bad_input():
     with pytest.raises(InputError, match="term"):
         diagnose_thermal(Recording(name="x", time_s=t, current_a=np.ones_like(t), temperature_c=30 + 0 * t),
                          candidates=("not_a_term",))
+
+
+def test_physical_ranges_follow_the_motor_in_the_parameter_file():
+    """The Talos class ranges stay as they are for the elbow; another motor's file widens them to its own
+    scale (a water-cooled traction PMSM: 0.08 K/W, a drive/running loss of hundreds of watts)."""
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+
+    elbow, pmsm = (term_specs(load_parameters(packaged_parameter_file(f))) for f in ("arm_left_4_joint",
+                                                                                      "paderborn_pmsm"))
+    assert elbow["one_node"].bounds == {"capacity_j_per_k": (100.0, 2e4), "resistance_k_per_w": (0.1, 20.0)}
+    assert elbow["drive_heating"].bounds["drive_idle_w"] == (0.0, 100.0)
+    lo, hi = pmsm["one_node"].bounds["resistance_k_per_w"]
+    assert lo <= 0.0796 / 10 + 1e-12 and hi == 20.0
+    motor = load_parameters(packaged_parameter_file("paderborn_pmsm")).motor
+    assert pmsm["drive_heating"].bounds["drive_idle_w"][1] == pytest.approx(5 * motor.resistance_ohm * 210.0 ** 2)

@@ -104,3 +104,26 @@ def test_ur3_joint_identified_early_validated_later(joint):
     stretches = read_recordings([UR3], MAPS / f"ur3_joint{joint}.toml").recordings
     fitted = _refit(load_parameters(packaged_parameter_file("ur3_joint")), list(stretches[:2]))
     assert validate_thermal([stretches[2]], fitted).rmse <= 1.0
+
+
+def test_cli_diagnose_names_the_paderborn_running_loss_and_writes_a_better_file(tmp_path):
+    """As a user runs it: the copper-only file against profile 24 through its column map. The torque step
+    at constant speed separates a running loss from the copper loss; the constant speed cannot separate a
+    speed-dependent loss from a constant one (not_determinable); the written file validates better."""
+    import json
+
+    from thermo_ddp.cli import main
+
+    columns, model = str(MAPS / "paderborn_profile_24.toml"), str(packaged_parameter_file("paderborn_pmsm"))
+    out, improved = tmp_path / "d.json", tmp_path / "improved.toml"
+    code = main(["diagnose", str(PADERBORN), "--columns", columns, "--model", model, "--json", str(out),
+                 "--write-model", str(improved)])
+    d = json.loads(out.read_text())
+    assert code == (0 if d["success"] else 1)
+    named = {m["term"] for m in d["missing_physics"]}
+    assert named & {"iron_losses", "drive_heating"} and d["not_determinable"]
+    loss = next(m for m in d["missing_physics"] if m["term"] in ("iron_losses", "drive_heating"))
+    assert loss["p_value"] < 1e-3 and 100 < loss["parameters"].get("drive_idle_w", 200) < 1600
+    assert d["validation"]["rmse_after"] <= min(d["validation"]["rmse_before"] / 3, 4.0)
+    whole = read_recordings([PADERBORN], MAPS / "paderborn_profile_24.toml").recordings
+    assert validate_thermal(whole, load_parameters(improved)).rmse < validate_thermal(whole, load_parameters(model)).rmse / 3

@@ -289,3 +289,16 @@ def test_loop_out_never_replaces_the_current_folder(where, tmp_path, monkeypatch
     monkeypatch.chdir(inner)
     refused(["loop", "--short", "--out", where], capsys, "current folder")
     assert inner.is_dir() and list(inner.iterdir()) == []
+
+
+def test_outputs_get_the_permissions_of_a_plain_new_file(tmp_path):
+    """Atomic writes go through a temporary file (owner-only when made); the result must not be."""
+    import os
+    import stat
+
+    from thermo_ddp.outputs import write_text_atomically
+
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    written = write_text_atomically(tmp_path / "atomic.txt", "x")
+    assert stat.S_IMODE(os.stat(written).st_mode) == stat.S_IMODE(os.stat(plain).st_mode)

@@ -57,10 +57,18 @@ def _check_name(option: str, out: Path) -> None:
 
 
 def _temporary_beside(target: Path) -> Path:
-    """A new empty temporary file in ``target``'s folder (hidden; its name short enough for any target)."""
+    """A new empty temporary file in ``target``'s folder (hidden; its name short enough for any target),
+    with the permissions a plain new file gets (mkstemp's are owner-only)."""
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name[:40]}.", suffix=target.suffix[:20], dir=target.parent)
+    os.fchmod(fd, 0o666 & ~_umask())
     os.close(fd)
     return Path(tmp)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _check_parent(option: str, out: Path) -> None:

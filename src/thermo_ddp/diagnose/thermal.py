@@ -68,6 +68,14 @@ CANDIDATE_TERMS = THERMAL_TERMS
 # (datasheets list no-load currents of 0.05-0.3 A; the no-load power also covers bearing friction).
 NO_LOAD_CURRENT_A = 0.1
 IRON_SHARE_OF_NO_LOAD = 0.5
+# Larger motors: a no-load current of 2 % of the rated current (the 0.1 A of a 5 A maxon; traction machines
+# lose 1-3 % of their rated power unloaded at rated speed).
+NO_LOAD_CURRENT_SHARE = 0.02
+# A drive idles at up to 100 W in the Talos class (the elbow's 23 W, report), or at up to 5 times the motor's
+# rated copper loss R I_nom^2 for larger drives.
+DRIVE_IDLE_SHARE = 5.0
+# Ranges of capacities and resistances also hold the parameter file's own value within this factor.
+FILE_VALUE_FACTOR = 10.0
 # The experiment that separates each term from what it can be confused with.
 EXPERIMENTS = {
     "friction_heating": "move at two speeds (e.g. 0.5 and 2 rad/s, 20 min each) with a light load, and hold the "
@@ -87,22 +95,40 @@ def iron_max(params: JointParameters) -> float:
     """Largest physical iron-loss coefficient k [W s^2/rad^2] (joint-side speed), see the constants above."""
     m = params.motor
     no_load_speed = m.bus_voltage_v / (m.back_emf_v_s_per_rad * m.gear_ratio)
-    return IRON_SHARE_OF_NO_LOAD * m.bus_voltage_v * NO_LOAD_CURRENT_A / no_load_speed ** 2
+    no_load_current = max(NO_LOAD_CURRENT_A, NO_LOAD_CURRENT_SHARE * m.current_nominal_a)
+    return IRON_SHARE_OF_NO_LOAD * m.bus_voltage_v * no_load_current / no_load_speed ** 2
+
+
+def _around_file(params: JointParameters, key: str, low: float, high: float) -> tuple[float, float]:
+    """(low, high) widened to hold the parameter file's own value within ``FILE_VALUE_FACTOR`` both ways:
+    the class ranges below are the Talos joints'; a file of another motor (a traction machine, a UR3 joint)
+    brings its own scale."""
+    value = params.thermal.values.get(key)
+    if value is None or not value > 0:
+        return low, high
+    return min(low, value / FILE_VALUE_FACTOR), max(high, value * FILE_VALUE_FACTOR)
 
 
 def term_specs(params: JointParameters) -> dict[str, TermSpec]:
     """Physical ranges of every term's parameters (inclusive).  Capacities: 0.1-20 kg of aluminium or
     copper (385-900 J/kg/K); resistances: maxon class data, winding-housing 0.5-5 K/W and
-    housing-ambient 1-10 K/W, widened; copper alpha: 0.00393 /K (report eq. 3) +-10 %; heat >= 0
-    (friction heat is free: no bound from the file's friction)."""
-    casing = {"winding_capacity_j_per_k": (1.0, 1000.0), "casing_capacity_j_per_k": (100.0, 2e4),
-              "winding_casing_k_per_w": (0.05, 10.0), "casing_ambient_k_per_w": (0.1, 20.0)}
+    housing-ambient 1-10 K/W, widened; both also hold the file's own values (another motor's scale);
+    copper alpha: 0.00393 /K (report eq. 3) +-10 %; heat >= 0 (friction heat is free: no bound from the
+    file's friction); drive idle heat and iron losses bounded by the motor's rating (constants above)."""
+    def scaled(ranges: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        return {key: _around_file(params, key, *bounds) for key, bounds in ranges.items()}
+
+    m = params.motor
+    drive_idle_max_w = max(100.0, DRIVE_IDLE_SHARE * m.resistance_ohm * m.current_nominal_a ** 2)
+    casing = scaled({"winding_capacity_j_per_k": (1.0, 1000.0), "casing_capacity_j_per_k": (100.0, 2e4),
+                     "winding_casing_k_per_w": (0.05, 10.0), "casing_ambient_k_per_w": (0.1, 20.0)})
     return {
-        "one_node": TermSpec("one_node", {"capacity_j_per_k": (100.0, 2e4), "resistance_k_per_w": (0.1, 20.0)}),
+        "one_node": TermSpec("one_node", scaled({"capacity_j_per_k": (100.0, 2e4), "resistance_k_per_w": (0.1, 20.0)})),
         "casing_node": TermSpec("casing_node", casing),
         "drive_heating": TermSpec("drive_heating", {"drive_capacity_j_per_k": (10.0, 1e4),
                                                     "drive_casing_k_per_w": (0.02, 50.0),
-                                                    "drive_idle_w": (0.0, 100.0), "drive_loss_w_per_a2": (0.0, 5.0)}),
+                                                    "drive_idle_w": (0.0, drive_idle_max_w),
+                                                    "drive_loss_w_per_a2": (0.0, 5.0)}),
         "friction_heating": TermSpec("friction_heating", {k: (0.0, math.inf) for k in FRICTION_KEYS}),
         "copper_resistance": TermSpec("copper_resistance", {"copper_alpha_per_k": (0.0035, 0.0045)}),
         "iron_losses": TermSpec("iron_losses", {IRON_KEY: (0.0, iron_max(params))}),
@@ -380,8 +406,11 @@ class ThermalDiagnosis:
         """Information only: the fitted friction heat against the file's friction power."""
         m = self.params.motor
         c1, c2 = (fit.parameters[k] for k in FRICTION_KEYS)
-        return (f"friction heat / the file's friction power: c1 / coulomb = {c1 / m.coulomb_friction_nm:.2f}, "
-                f"c2 / viscous = {c2 / m.viscous_friction_nm_s_per_rad:.2f} (information, not a bound)")
+
+        def ratio(heat: float, friction: float) -> str:
+            return f"{heat / friction:.2f}" if friction > 0 else "n/a (the file has none)"
+        return (f"friction heat / the file's friction power: c1 / coulomb = {ratio(c1, m.coulomb_friction_nm)}, "
+                f"c2 / viscous = {ratio(c2, m.viscous_friction_nm_s_per_rad)} (information, not a bound)")
 
     def to_dict(self) -> dict:
         base, final = self.baseline_fit, self.final_fit

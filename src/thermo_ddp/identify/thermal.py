@@ -88,7 +88,7 @@ _SEARCH = {
     "casing_capacity_j_per_k": ("log", 1.0, 1e6), "drive_capacity_j_per_k": ("log", 1.0, 1e6),
     "resistance_k_per_w": ("log", 1e-3, 100.0), "winding_casing_k_per_w": ("log", 1e-3, 100.0),
     "casing_ambient_k_per_w": ("log", 1e-3, 100.0), "drive_casing_k_per_w": ("log", 1e-3, 100.0),
-    "drive_ambient_k_per_w": ("log", 1e-3, 1000.0), "drive_idle_w": ("log", 1e-3, 300.0),
+    "drive_ambient_k_per_w": ("log", 1e-3, 1000.0), "drive_idle_w": ("log", 1e-3, 1e5),
     "drive_loss_w_per_a2": ("lin", 0.0, 5.0, 0.1),
     "friction_heat_linear_w_s_per_rad": ("lin", 0.0, 200.0, 1.0),
     "friction_heat_quadratic_w_s2_per_rad2": ("lin", 0.0, 200.0, 1.0),
