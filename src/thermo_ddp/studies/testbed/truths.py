@@ -21,7 +21,9 @@ import numpy as np
 from scipy.linalg import expm
 
 from ...recordings import Recording
+from .physics import PlantParameters
 
+_ELBOW = PlantParameters()  # the testbed elbow's true values: the truths share what they do not change
 CONCEALABLE = ("friction_heating", "drive_heating", "casing_node")
 
 
@@ -32,20 +34,20 @@ class ThreeNodeTruth:
     with 0.1 K steps cannot resolve (a concealed casing node must be observable to be a fair target)."""
 
     winding_capacity_j_per_k: float = 120.0       # a heavy winding: C_w R_wc = 4 min, visible through the casing
-    casing_capacity_j_per_k: float = 1200.0
-    drive_capacity_j_per_k: float = 300.0
+    casing_capacity_j_per_k: float = _ELBOW.casing_capacity_j_per_k
+    drive_capacity_j_per_k: float = _ELBOW.drive_capacity_j_per_k
     winding_casing_k_per_w: float = 2.0
-    casing_ambient_k_per_w: float = 1.3
-    drive_casing_k_per_w: float = 0.6
-    drive_ambient_k_per_w: float = 2.5
-    resistance_ohm: float = 0.70
-    resistance_ref_c: float = 25.0
-    copper_alpha_per_k: float = 0.00393
+    casing_ambient_k_per_w: float = _ELBOW.casing_ambient_k_per_w
+    drive_casing_k_per_w: float = _ELBOW.drive_casing_k_per_w
+    drive_ambient_k_per_w: float = _ELBOW.drive_ambient_k_per_w
+    resistance_ohm: float = _ELBOW.resistance_ohm
+    resistance_ref_c: float = _ELBOW.resistance_ref_c
+    copper_alpha_per_k: float = _ELBOW.copper_alpha_per_k
     friction_linear_w_s_per_rad: float = 3.0      # several times the file's 1.17 N m Coulomb friction
     friction_quadratic_w_s2_per_rad2: float = 1.0
     friction_to_winding: float = 0.3
     drive_idle_w: float = 15.0
-    drive_loss_w_per_a2: float = 0.1
+    drive_loss_w_per_a2: float = _ELBOW.drive_loss_w_per_a2
     concealed: frozenset = frozenset(CONCEALABLE)
 
     def randomised(self, rng: np.random.Generator, spread: float = 0.3) -> "ThreeNodeTruth":
