@@ -186,3 +186,14 @@ def test_physical_ranges_follow_the_motor_in_the_parameter_file():
     assert lo <= 0.0796 / 10 + 1e-12 and hi == 20.0
     motor = load_parameters(packaged_parameter_file("paderborn_pmsm")).motor
     assert pmsm["drive_heating"].bounds["drive_idle_w"][1] == pytest.approx(5 * motor.resistance_ohm * 210.0 ** 2)
+
+
+def test_white_noise_temperature_is_not_diagnosed_as_fine():
+    """A temperature of pure noise (tens of kelvin between samples) is fitted 'to within its noise' by any
+    model: that is no diagnosis. The fuzzer's silent-garbage class (issue 14)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 3 * 3600.0, 1.0)
+    rec = Recording(name="noise", time_s=t, current_a=rng.uniform(0, 5, t.size),
+                    temperature_c=rng.uniform(20, 110, t.size))
+    d = diagnose_thermal(rec)
+    assert not d.success and d.status == "model_does_not_fit" and "broken sensor" in d.message

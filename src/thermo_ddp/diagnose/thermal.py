@@ -149,7 +149,8 @@ class ThermalDiagnosisSettings:
     settings of every fit (10 s grid: thermal time constants are >= tens of seconds, the held losses
     are averaged exactly); ``selection``: level and effect size of the nested tests;
     ``max_noise_ratio``: the chosen model does not fit when its RMSE exceeds this many noise
-    standard deviations; ``min_samples`` / ``min_span_s``: less data per recording (on the grid) is
+    standard deviations; ``max_noise_c``: nor when that noise itself exceeds this (a motor's temperature does
+    not jump kelvins between samples: larger "noise" is a wrong column or a broken sensor); ``min_samples`` / ``min_span_s``: less data per recording (on the grid) is
     ``insufficient_data``; ``progress``: tqdm bar over the fits (None: only on a terminal)."""
 
     cv_blocks: int = 3
@@ -158,6 +159,7 @@ class ThermalDiagnosisSettings:
     localise: ThermalLocaliseSettings = ThermalLocaliseSettings()
     selection: SubsetSettings = SubsetSettings()
     max_noise_ratio: float = 3.0
+    max_noise_c: float = 2.0
     min_samples: int = 30
     min_span_s: float = 900.0
     progress: bool | None = None
@@ -166,6 +168,7 @@ class ThermalDiagnosisSettings:
         name = "thermal diagnosis settings"
         require(isinstance(self.cv_blocks, int) and self.cv_blocks >= 2, name, "cv_blocks", self.cv_blocks, "must be >= 2")
         require(self.max_noise_ratio > 1, name, "max_noise_ratio", self.max_noise_ratio, "must be > 1")
+        require(self.max_noise_c > 0, name, "max_noise_c", self.max_noise_c, "must be > 0")
         require(self.min_samples >= 4 * self.cv_blocks, name, "min_samples", self.min_samples,
                 f"must be >= 4 cv_blocks = {4 * self.cv_blocks}")
         require(self.min_span_s >= 0, name, "min_span_s", self.min_span_s, "must be >= 0")
@@ -583,10 +586,14 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     final = fits[selection.chosen.terms]
     locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[frozenset()], final))
     noise = _noise(final, grids, settings.localise.noise_window_s)
-    fitting = noise.rmse_ratio <= settings.max_noise_ratio
+    fitting = noise.rmse_ratio <= settings.max_noise_ratio and noise.total_c <= settings.max_noise_c
     message = (f"{final.model}: rmse {final.rmse:.3g} K = {noise.rmse_ratio:.2f} x the residual noise "
-               f"{noise.total_c:.3g} K" + ("" if fitting else f" (> {settings.max_noise_ratio:g}): no candidate "
-                                           "explains these recordings"))
+               f"{noise.total_c:.3g} K")
+    if noise.rmse_ratio > settings.max_noise_ratio:
+        message += f" (> {settings.max_noise_ratio:g}): no candidate explains these recordings"
+    elif not fitting:
+        message += (f", above {settings.max_noise_c:g} K: the temperature jumps between samples as no thermal "
+                    "network does (a wrong column or a broken sensor?); nothing here can be diagnosed")
     hosted, unresolved = _hosted(final, grids)
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
