@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, RunFailed
 from .outputs import Outputs
 from .tasks._common import DEFAULT_HOLD_S
 
@@ -374,6 +374,9 @@ def main(argv: list[str] | None = None) -> int:
         except InputError as err:
             print(f"thermo-ddp: {err}", file=sys.stderr)
             return 2
+        except RunFailed as err:
+            print(f"thermo-ddp: {err}; nothing written, earlier files unchanged", file=sys.stderr)
+            return 1
         except KeyboardInterrupt:
             print("thermo-ddp: interrupted; nothing written, earlier files unchanged", file=sys.stderr)
             return 130

@@ -1,4 +1,5 @@
-"""Errors raised on bad input: one line naming the source, the field and the value."""
+"""Errors: bad input (one line naming the source, the field and the value, exit 2) and a run that started
+but could not finish (one line, exit 1)."""
 from __future__ import annotations
 
 
@@ -18,6 +19,15 @@ class InputError(ValueError):
         if len(shown) > MAX_SHOWN:
             shown = shown[:MAX_SHOWN] + "..."
         super().__init__(one_line(f"{where}: {field} = {shown}: {problem}"))
+
+
+class RunFailed(RuntimeError):
+    """A run that started on valid input but cannot reach a result (a step whose fit failed): the CLI
+    prints one line and exits 1, writing nothing."""
+
+    def __init__(self, step: str, status: str, message: str):
+        self.step, self.status = step, status
+        super().__init__(one_line(f"{step} failed ({status}): {message}"))
 
 
 def _is_scalar(value: object) -> bool:

@@ -40,6 +40,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require, settings_from_mapping
+from ..errors import RunFailed
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
@@ -432,7 +433,8 @@ def identify_models(recording_files, out_dir: Path,
     write the ORIGINAL (identified one-node baseline, constant ambient, no friction heat) and IMPROVED
     (the re-identified diagnosed structure) parameter files into ``out_dir``."""
     diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
-    require(diagnosis.success, _SRC, "diagnosis", diagnosis.status, diagnosis.message)
+    if not diagnosis.success:
+        raise RunFailed("the loop's diagnosis", diagnosis.status, diagnosis.message)
     improved = refit(diagnosis, recording_files)
     out_dir.mkdir(parents=True, exist_ok=True)
     original = parameter_file(diagnosis.params, diagnosis.baseline_fit, diagnosis.recordings)
@@ -451,7 +453,8 @@ def refit(diagnosis: ThermalDiagnosis, recording_files) -> ThermalFit:
     final = diagnosis.final_fit
     fit = identify_thermal(list(recording_files), terms=final.terms, parameters=diagnosis.params,
                            start=final.parameters)
-    require(fit.success, _SRC, "refit", fit.status, fit.message)
+    if not fit.success:
+        raise RunFailed("the loop's refit", fit.status, fit.message)
     log.info("refit at full rate (%s): %s", fit.model, ", ".join(f"{k} {v:.4g}" for k, v in fit.parameters.items()))
     return fit
 
