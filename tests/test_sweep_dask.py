@@ -89,7 +89,7 @@ def test_cli_sweep_writes_the_contract_json(tmp_path, capsys):
     assert (tmp_path / "sweep.png").stat().st_size > 0
 
 
-@pytest.mark.parametrize("argv, field", [(["--runs", "0"], "--runs"), (["--seed", "-1"], "--seed"),
+@pytest.mark.parametrize("argv, field", [(["--runs", "0"], "runs"), (["--seed", "-1"], "seed"),
                                           (["--scheduler", "nonsense"], "scheduler"),
                                           (["--scheduler", "tcp://127.0.0.1:9"], "--scheduler")])
 def test_cli_sweep_bad_input_is_one_line_exit_2(argv, field, tmp_path, capsys):

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from .._config import require
 from .._figures import new_figure
 from ..model.parameters import THERMAL_KEYS as FILE_THERMAL_KEYS
 from ..mpc.closed_loop import build_models, run_closed_loop
@@ -171,8 +172,10 @@ def robustness_sweep(runs: int = 200, seed: int = 0, short: bool = False,
                      engine: EngineSettings | None = EngineSettings(), progress: bool = True) -> SweepResult:
     """``runs`` randomised closed loops: on Dask (``engine``: a LocalCluster by default, or the cluster
     at ``engine.scheduler``), or in this process one after the other when ``engine`` is None."""
-    if not (isinstance(runs, (int, np.integer)) and 1 <= runs <= MAX_RUNS):
-        raise ValueError(f"runs must be an integer in [1, {MAX_RUNS}], got {runs!r}")
+    integer = isinstance(runs, (int, np.integer)) and not isinstance(runs, bool)
+    require(integer and 1 <= runs <= MAX_RUNS, "robustness_sweep", "runs", runs, f"expected an integer in [1, {MAX_RUNS}]")
+    require(isinstance(seed, (int, np.integer)) and seed >= 0, "robustness_sweep", "seed", seed,
+            "expected an integer >= 0 (a numpy SeedSequence entropy)")
     seeds = run_seeds(seed, int(runs))
     started = time.perf_counter()
     if engine is None:
