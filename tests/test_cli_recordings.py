@@ -6,8 +6,9 @@ import pytest
 
 from thermo_ddp.cli import main
 
-DIAGNOSIS_KEYS = {"physics", "recordings", "baseline", "mismatches", "missing_physics", "final", "validation",
-                  "unexplained"}
+DIAGNOSIS_KEYS = {"success", "status", "message", "physics", "recordings", "rows", "baseline", "mismatches",
+                  "missing_physics", "not_determinable", "final", "validation", "unexplained"}
+TERM_KEYS = {"term", "evidence", "parameters", "rmse", "p_value", "effect_k", "ci95", "collinear_with"}
 
 
 @pytest.fixture(scope="module")
@@ -30,6 +31,10 @@ def test_diagnose_mechanical_on_emps_writes_contract_json_and_plot(emps, tmp_pat
     assert DIAGNOSIS_KEYS <= set(d)
     assert d["physics"] == "mechanical"
     assert [m["term"] for m in d["missing_physics"]] == ["coulomb_friction"]
+    term, = d["missing_physics"]
+    assert TERM_KEYS <= set(term) and term["p_value"] < 1e-3 and d["success"] and d["status"] == "ok"
+    lo, hi = term["ci95"]["coulomb_friction"]
+    assert lo < 20.3935 * 1.03 and hi > 20.3935 * 0.97  # the published value (Janot et al.) within 3 % of the interval
     assert d["validation"]["rmse_after"] < 0.65 * d["validation"]["rmse_before"]
     assert fig.stat().st_size > 10_000
 

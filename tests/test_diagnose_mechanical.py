@@ -22,7 +22,8 @@ from thermo_ddp.identify import REFERENCE_TERMS, linear_fit
 from thermo_ddp.recordings import Recording
 
 PUBLISHED = {"inertia": 95.1089, "viscous_friction": 203.5034, "coulomb_friction": 20.3935}
-CONTRACT_KEYS = {"physics", "recordings", "baseline", "mismatches", "missing_physics", "final", "validation", "unexplained"}
+CONTRACT_KEYS = {"success", "status", "message", "physics", "recordings", "baseline", "mismatches", "missing_physics",
+                 "not_determinable", "final", "validation", "unexplained"}
 INTERVAL_KEYS = {"recording", "start_s", "end_s", "regime", "mean_residual"}
 
 
@@ -79,7 +80,8 @@ def test_diagnosis_json_contract(emps_diagnosis, tmp_path):
     for item in result["mismatches"] + result["unexplained"]:
         assert set(item) == INTERVAL_KEYS and item["start_s"] <= item["end_s"]
     missing = result["missing_physics"][0]
-    assert set(missing) == {"term", "evidence", "parameters", "rmse"} and "held-out" in missing["evidence"]
+    assert set(missing) == {"term", "evidence", "parameters", "rmse", "p_value", "effect_k", "ci95", "collinear_with"}
+    assert "held-out" in missing["evidence"] and missing["p_value"] < 1e-3 and missing["effect_k"] > 0
     numbers = [result["baseline"]["rmse"], result["final"]["rmse"], *result["validation"].values()][:4]
     assert all(math.isfinite(x) for x in numbers if isinstance(x, float))
     png = emps_diagnosis.plot(tmp_path / "diag.png")

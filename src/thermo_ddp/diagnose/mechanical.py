@@ -29,7 +29,9 @@ from ..identify.mechanical import (BASELINE_TERMS, STRIBECK_VELOCITY, JointKinem
                                    fit_kinematics, joint_kinematics, predict_effort)
 from ..recordings import Recording, as_recordings, read_recordings
 from .localise import Localisation, LocaliseSettings, ResidualSeries, localise
-from .selection import ModelFit, SelectedTerms, Selection, SelectionSettings, TermSpec, forward_select
+from ..identify.fit_report import Z95, integrated_autocorrelation
+from .selection import (Assessment, ModelFit, SelectedTerms, Selection, SelectionSettings, SubsetFit, TermSpec,
+                        forward_select, nested_test)
 from .._figures import new_figure
 
 log = logging.getLogger(__name__)
@@ -120,6 +122,27 @@ def _residual_series(kins: Sequence[JointKinematics], mf: ModelFit, settings: Me
     return out
 
 
+def _as_subset_fit(mf: ModelFit) -> SubsetFit:
+    res = np.asarray(mf.fit.residuals, float)
+    return SubsetFit(frozenset(mf.terms), float(res @ res), int(res.size), len(mf.fit.stderr) or mf.fit.n_parameters,
+                     integrated_autocorrelation(res))
+
+
+def _term_entry(a: Assessment, parent: ModelFit) -> dict:
+    """The contract's entry of an accepted term: its parameters, the nested likelihood-ratio test against the
+    model it was added to (sample size corrected for residual autocorrelation), the RMS change of the fitted
+    effort it makes (``effect_k``, in the effort's units: N m or N) and 95 % intervals. ``collinear_with``
+    stays empty: the linear fit refuses a rank-deficient regressor set instead."""
+    fit = a.candidate.fit
+    keys = [k for k in fit.parameters if k == a.term or (a.term == "stribeck_friction" and k == STRIBECK_VELOCITY)]
+    return {"term": a.term, "evidence": a.evidence, "parameters": {k: float(fit.parameters[k]) for k in keys},
+            "rmse": fit.rmse, "p_value": nested_test(_as_subset_fit(parent), _as_subset_fit(a.candidate)).p_value,
+            "effect_k": float(np.sqrt(np.mean((np.asarray(fit.fitted) - np.asarray(parent.fit.fitted)) ** 2))),
+            "ci95": {k: [float(fit.parameters[k] - Z95 * fit.stderr[k]), float(fit.parameters[k] + Z95 * fit.stderr[k])]
+                     for k in keys if k in fit.stderr},
+            "collinear_with": []}
+
+
 @dataclasses.dataclass(frozen=True)
 class Diagnosis(SelectedTerms):
     """Result of :func:`diagnose_mechanical`; ``to_dict()`` is the contract's diagnosis JSON."""
@@ -135,12 +158,10 @@ class Diagnosis(SelectedTerms):
 
     def to_dict(self) -> dict:
         sel = self.selection
-        missing = []
-        for a in sel.accepted:
-            params = {k: float(v) for k, v in a.candidate.fit.parameters.items()
-                      if k == a.term or (a.term == "stribeck_friction" and k == STRIBECK_VELOCITY)}
-            missing.append({"term": a.term, "evidence": a.evidence, "parameters": params, "rmse": a.candidate.fit.rmse})
-        return {"physics": self.physics, "recordings": list(self.recordings),
+        parents = (sel.baseline, *(a.candidate for a in sel.accepted[:-1]))
+        missing = [_term_entry(a, parent) for a, parent in zip(sel.accepted, parents)]
+        return {"success": self.success, "status": self.status, "message": self.message,
+                "physics": self.physics, "recordings": list(self.recordings), "not_determinable": [],
                 "baseline": sel.baseline.fit.summary(), "mismatches": sel.baseline_localisation.to_list(),
                 "missing_physics": missing, "final": sel.final.fit.summary(),
                 "validation": {"method": f"blocked cross-validation: {self.cv_blocks} contiguous blocks per recording, "
