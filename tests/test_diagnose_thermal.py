@@ -197,3 +197,19 @@ def test_white_noise_temperature_is_not_diagnosed_as_fine():
                     temperature_c=rng.uniform(20, 110, t.size))
     d = diagnose_thermal(rec)
     assert not d.success and d.status == "model_does_not_fit" and "broken sensor" in d.message
+
+
+def test_without_a_room_thermometer_a_steady_heat_is_the_rooms_stand_in_not_a_claim(tmp_path):
+    """The drive's steady heat on a one-node model is the same as a warmer room: with ambient_c logged the
+    diagnosis names it; without, it fits it in every model (so the fit holds) but names nothing for it and
+    says why, with the experiment that would tell."""
+    from thermo_ddp.studies.testbed import COLUMNS, PlantParameters, static_3a
+
+    rec = static_3a(params=PlantParameters().with_effects("drive"), heating_s=1800.0, cooling_s=1800.0)
+    logged = diagnose_thermal(rec.to_csv(tmp_path / "logged.csv"))
+    unlogged = diagnose_thermal(rec.to_csv(tmp_path / "unlogged.csv", tuple(c for c in COLUMNS if c != "ambient_c")))
+    assert "drive_heating" in logged.missing_physics
+    assert "drive_heating" not in unlogged.missing_physics and unlogged.success
+    note = next(n for n in unlogged.to_dict()["not_determinable"] if n["term"] == "drive_heating")
+    assert "ambient_c" in note["reason"] and "ambient_c" in note["experiment"]
+    assert unlogged.final_fit.rmse <= 1.5 * logged.final_fit.rmse   # the stand-in keeps the fit

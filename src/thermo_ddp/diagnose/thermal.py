@@ -88,6 +88,14 @@ EXPERIMENTS = {
                    "resistance shows the fast winding node the casing sensor smooths out",
     "copper_resistance": "hold two currents (e.g. 3 A and 6 A) until steady with the motor voltage logged",
 }
+# Without a room thermometer a steady heat on the sensor node and a room warmer than the file's ambient_c are
+# one and the same (exactly so for one node): the drive heat is then fitted in every model as the room's
+# stand-in, never tested, never named.
+ROOM_NOTE = {"term": "drive_heating",
+             "reason": "no recording logs the room (ambient_c): a steady heat on the sensor node reads the same as a "
+                       "room warmer than the parameter file's ambient_c; fitted in every model as the room's stand-in, "
+                       "not named",
+             "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
 _CASING_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
 
 
@@ -355,6 +363,7 @@ class ThermalDiagnosis:
     not_determinable: tuple[dict, ...] = ()
     cv_blocks: int = 3
     hosted: frozenset = frozenset()  # in the final structure, not evidenced by the data (not named)
+    baseline_terms: frozenset = frozenset()  # in every fitted set, never tested (the room's stand-in, see ROOM_NOTE)
 
     @property
     def final_terms(self) -> frozenset:
@@ -362,7 +371,7 @@ class ThermalDiagnosis:
 
     @property
     def baseline_fit(self) -> ThermalFit | None:
-        return self.fits.get(frozenset())
+        return self.fits.get(self.baseline_terms)
 
     @property
     def final_fit(self) -> ThermalFit | None:
@@ -371,7 +380,7 @@ class ThermalDiagnosis:
     @property
     def missing_physics(self) -> list[str]:
         """The named terms: the chosen set without the terms it only hosts (see :func:`_hosted`)."""
-        return [t for t in THERMAL_TERMS if t in self.final_terms and t not in self.hosted]
+        return [t for t in THERMAL_TERMS if t in self.final_terms - self.baseline_terms and t not in self.hosted]
 
     @property
     def explained(self) -> dict[str, tuple[RegimeGain, ...]]:
@@ -565,26 +574,31 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
         return ThermalDiagnosis(names, params, grids, False, "insufficient_data", short, rows=rows,
                                 cv_blocks=settings.cv_blocks)
     usable, skipped = _usable_candidates(candidates, grids)
+    base = frozenset()
+    if "drive_heating" in usable and not any(g.has_ambient for g in grids):
+        usable.remove("drive_heating")
+        base = frozenset({"drive_heating"})
+        skipped.append(ROOM_NOTE)
     regimes = tuple(thermal_regimes(g, settings.regimes) for g in grids)
     specs = term_specs(params)
     hide = None if settings.progress is None else not settings.progress
     with tqdm(desc="thermal diagnosis fits", unit="fit", disable=hide) as bar:
         fitter = _Fitter(params, grids, settings, specs, bar)
-        sets = [frozenset(c) for k in range(len(usable) + 1) for c in itertools.combinations(usable, k)]
+        sets = [frozenset(c) | base for k in range(len(usable) + 1) for c in itertools.combinations(usable, k)]
         for terms in sets:
             fitter.fit(terms)
         selection = subset_select([fitter.subset(t) for t in sets], settings.selection)
         cv = None
         if selection is not None:
             fitter.polish(selection.chosen.terms)
-            cv = (fitter.cv_rmse(frozenset()), fitter.cv_rmse(selection.chosen.terms))
+            cv = (fitter.cv_rmse(base), fitter.cv_rmse(selection.chosen.terms))
     fits = dict(fitter.fits)
     if selection is None:
         return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
                                 "no candidate model converged within physical bounds", rows, regimes, None, fits,
-                                not_determinable=tuple(skipped), cv_blocks=settings.cv_blocks)
+                                not_determinable=tuple(skipped), cv_blocks=settings.cv_blocks, baseline_terms=base)
     final = fits[selection.chosen.terms]
-    locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[frozenset()], final))
+    locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[base], final))
     noise = _noise(final, grids, settings.localise.noise_window_s)
     fitting = noise.rmse_ratio <= settings.max_noise_ratio and noise.total_c <= settings.max_noise_c
     message = (f"{final.model}: rmse {final.rmse:.3g} K = {noise.rmse_ratio:.2f} x the residual noise "
@@ -598,7 +612,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
                             tuple(skipped) + tuple(unresolved) + tuple(_undetermined(selection, fits)),
-                            settings.cv_blocks, hosted)
+                            settings.cv_blocks, hosted, base)
 
 
 def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,
