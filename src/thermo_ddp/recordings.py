@@ -403,7 +403,7 @@ def read_mapped_csv(path: str | Path, columns: ColumnMap, name: str | None = Non
     if incomplete.any() and not columns.skip_incomplete:
         k = int(np.argmax(incomplete))
         column = next(c for c, e in empty.items() if e[k])
-        raise InputError(source, column, "", f"empty cell (set [rows] skip_incomplete = true in a column map "
+        raise InputError(source, column, "", "empty cell (set [rows] skip_incomplete = true in a column map "
                          "to drop such rows)", row=int(rows[k]))
     keep = ~incomplete
     if not keep.any():
