@@ -173,3 +173,26 @@ def test_motion_quality_counts_reversals_and_speed_near_the_stops():
     wobble = MotionQuality.of(t, q, v + 0.3 * np.sin(8 * np.pi * t), -2.0, 0.0)
     assert wobble.reversals > 1
     assert not MotionQuality.of(t, q - 2.0, v, -2.0, 0.0).inside_range
+
+
+def _structure(problem):
+    funs = [problem.dynamics, problem.dynamics_jacobians]
+    funs += [c.residual for c in problem.costs + problem.terminal_costs]
+    funs += [c.function for c in problem.constraints + problem.terminal_constraints]
+    return [f.serialize() for f in funs] + [c.weight.tobytes() for c in problem.costs + problem.terminal_costs]
+
+
+def test_every_number_of_a_request_is_a_runtime_parameter():
+    """Two requests that share nothing but the model, the step and the integrator build the same functions
+    (so one compiled solver serves both); the payload read from the parameters is the model's own."""
+    from thermo_ddp.model.actuated import load_model
+    a = build_lift_problem(LiftSettings(payload_kg=40.0, limit_c=84.0, hold_s=3.0))
+    b = build_lift_problem(LiftSettings(payload_kg=25.0, limit_c=120.0, hold_s=9.0, goal_rad=-1.2, start_rad=-0.1,
+                                        energy_weight=0.5, velocity_weight=0.2, tracking_weight=10.0,
+                                        hold_tolerance_rad=0.05, velocity_limit_rad_s=2.0))
+    assert a.problem.horizon != b.problem.horizon
+    assert _structure(a.problem) == _structure(b.problem)
+    own = load_model(payload_kg=25.0).step(b.settings.dt_s, b.settings.integrator)
+    x, u = b.model.state(q=[-0.8], v=[0.4]), np.array([3.0])
+    assert np.abs(np.array(b.problem.dynamics(x, u, b.params[5])).ravel()
+                  - np.array(own(x, u, b.model.ambient_c)).ravel()).max() < 1e-12

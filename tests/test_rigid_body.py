@@ -66,3 +66,18 @@ def test_aba_derivatives_match_pinocchio(setup):
         _close(dq, ddq_dq)
         _close(dv, ddq_dv)
         _close(dtau, minv)
+
+
+@pytest.mark.parametrize("joints", [CASES[1], CASES[7]], ids=["elbow", "arm"])
+def test_runtime_payload_matches_pinocchio_models_built_with_each_payload(joints):
+    """One CasADi function with the payload as an input equals Pinocchio's model built with that payload."""
+    arm = build_arm(ArmSettings(joints=joints, payload_kg=0.0), {j: 0.1 for j in joints})
+    rb = RigidBodyDynamics(arm.model, (arm.unloaded_inertias, arm.inertias_per_payload_kg))
+    q, v, tau, m = ca.SX.sym("q", arm.nv), ca.SX.sym("v", arm.nv), ca.SX.sym("tau", arm.nv), ca.SX.sym("m")
+    aba = ca.Function("aba", [q, v, tau, m], [rb.aba(q, v, tau, m)])
+    rng = np.random.default_rng(3)
+    for payload_kg in (0.0, 7.5, 40.0, 100.0):
+        loaded = build_arm(ArmSettings(joints=joints, payload_kg=payload_kg), {j: 0.1 for j in joints}).model
+        data = loaded.createData()
+        for q0, v0, _, tau0 in _states(loaded, rng, count=20):
+            _close(aba(q0, v0, tau0, payload_kg), pin.aba(loaded, data, q0, v0, tau0))

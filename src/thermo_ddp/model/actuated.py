@@ -7,6 +7,7 @@ and the planner all use these same functions.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -70,6 +71,12 @@ class ActuatedArm:
         params = {j: params[j] for j in arm.joints}
         networks = {j: (networks or {}).get(j) or network_from_parameters(p.thermal) for j, p in params.items()}
         return cls(arm, params, networks, *_build_functions(arm, params, networks))
+
+    @functools.cached_property
+    def runtime_payload_functions(self) -> tuple[ca.Function, ca.Function]:
+        """``ode`` and ``ode_jacobians`` with the payload as a runtime input: the third input is
+        ``ambient_payload`` = [ambient_c, payload_kg] (this model's own payload is not used)."""
+        return _build_functions(self.arm, self.params, self.networks, runtime_payload=True)[:2]
 
     # --- names and layout -------------------------------------------------------------
     @property
@@ -145,18 +152,21 @@ class ActuatedArm:
         return a
 
     # --- functions --------------------------------------------------------------------
-    def step(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
-        """Named ``step(x, current_a, ambient_c) -> x_next``."""
+    def step(self, dt_s: float, integrator: str = "rk4", runtime_payload: bool = False) -> ca.Function:
+        """Named ``step(x, current_a, ambient_c) -> x_next``; with ``runtime_payload`` the third input is
+        ``ambient_payload`` = [ambient_c, payload_kg] (the model's own payload is then not used)."""
         dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
-        return make_step(self.ode, dt_s, check_integrator(_SRC, integrator))
+        ode = self.runtime_payload_functions[0] if runtime_payload else self.ode
+        return make_step(ode, dt_s, check_integrator(_SRC, integrator))
 
-    def step_jacobians(self, dt_s: float, integrator: str = "rk4") -> ca.Function:
-        """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)``."""
+    def step_jacobians(self, dt_s: float, integrator: str = "rk4", runtime_payload: bool = False) -> ca.Function:
+        """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)`` (inputs as :meth:`step`)."""
         dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
         substeps = rk4_substeps(check_integrator(_SRC, integrator))
         if substeps is not None:
-            return rk4_step_jacobians(self.ode_jacobians, dt_s, substeps)
-        return step_jacobians(self.step(dt_s, integrator))
+            jac = self.runtime_payload_functions[1] if runtime_payload else self.ode_jacobians
+            return rk4_step_jacobians(jac, dt_s, substeps)
+        return step_jacobians(self.step(dt_s, integrator, runtime_payload))
 
     def static_current_a(self, q) -> np.ndarray:
         """Currents that hold posture ``q`` at rest (gravity only; friction is zero at v = 0)."""
@@ -216,13 +226,19 @@ class Trajectory:
         return np.array(out[self.model.outputs.name_out().index(name)]).T
 
 
-def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Function, ca.Function]:
-    """``arm_ode``, ``arm_ode_jacobians`` (analytic rigid-body partials) and ``arm_outputs``."""
+def _build_functions(arm: Arm, params, networks, runtime_payload: bool = False) -> tuple[ca.Function, ...]:
+    """``arm_ode``, ``arm_ode_jacobians`` (analytic rigid-body partials) and ``arm_outputs``, at the arm's
+    payload or, with ``runtime_payload``, with the input ``ambient_payload`` = [ambient_c, payload_kg]."""
     n = arm.nv
     sizes = [len(networks[j].nodes) for j in arm.joints]
     x = ca.SX.sym("x", 2 * n + sum(sizes))
     u = ca.SX.sym("current_a", n)
-    ambient = ca.SX.sym("ambient_c")
+    ambient, env = ca.SX.sym("ambient_c"), ca.SX.sym("ambient_payload", 2)
+    if runtime_payload:
+        ambient, payload = env[0], env[1]
+        rigid = RigidBodyDynamics(arm.model, (arm.unloaded_inertias, arm.inertias_per_payload_kg))
+    else:
+        payload, rigid = None, RigidBodyDynamics(arm.model)
     q, v = x[:n], x[n:2 * n]
     offsets = np.cumsum([2 * n] + sizes)
     tau, dtemps, outs = [], [], {k: [] for k in ("voltage_v", "joint_torque_nm", "joule_w", "friction_w",
@@ -239,8 +255,7 @@ def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Functi
             outs[key].append(val)
     tau, dtemps = ca.vertcat(*tau), ca.vertcat(*dtemps)
     tau_sym = ca.SX.sym("tau", n)
-    acc, da_dq, da_dv, minv = (ca.substitute(e, tau_sym, tau)
-                               for e in RigidBodyDynamics(arm.model).aba_derivatives(q, v, tau_sym))
+    acc, da_dq, da_dv, minv = (ca.substitute(e, tau_sym, tau) for e in rigid.aba_derivatives(q, v, tau_sym, payload))
     xdot = ca.vertcat(v, acc, dtemps)
     nt = x.numel() - 2 * n
     dxdot_dx = ca.vertcat(
@@ -248,11 +263,12 @@ def _build_functions(arm: Arm, params, networks) -> tuple[ca.Function, ca.Functi
         ca.horzcat(da_dq, da_dv + minv @ ca.jacobian(tau, v), ca.SX.zeros(n, nt)),
         ca.jacobian(dtemps, x))
     dxdot_du = ca.vertcat(ca.SX.zeros(n, n), minv @ ca.jacobian(tau, u), ca.jacobian(dtemps, u))
-    names_in = ["x", "current_a", "ambient_c"]
-    ode = ca.Function("arm_ode", [x, u, ambient], [xdot], names_in, ["xdot"])
-    ode_jac = ca.Function("arm_ode_jacobians", [x, u, ambient], [xdot, dxdot_dx, dxdot_du], names_in,
+    p, suffix = (env, "_payload") if runtime_payload else (ambient, "")
+    names_in = ["x", "current_a", "ambient_payload" if runtime_payload else "ambient_c"]
+    ode = ca.Function("arm_ode" + suffix, [x, u, p], [xdot], names_in, ["xdot"])
+    ode_jac = ca.Function("arm_ode_jacobians" + suffix, [x, u, p], [xdot, dxdot_dx, dxdot_du], names_in,
                           ["xdot", "dxdot_dx", "dxdot_du"])
-    outputs = ca.Function("arm_outputs", [x, u, ambient], [ca.vertcat(*vals) for vals in outs.values()],
+    outputs = ca.Function("arm_outputs" + suffix, [x, u, p], [ca.vertcat(*vals) for vals in outs.values()],
                           names_in, list(outs))
     return ode, ode_jac, outputs
 

@@ -78,6 +78,11 @@ class Arm:
     locked_joints: Mapping[str, float]
     payload_frame: str
     payload_translation_m: np.ndarray
+    # Spatial inertias (6x6, one per moving joint) of the reduced model without the payload, and of 1 kg of
+    # payload: the model's inertias are ``unloaded + payload_kg * per_payload_kg``, so the payload can be a
+    # runtime parameter of the CasADi dynamics (thermo_ddp.model.rigid_body) while this model keeps its own.
+    unloaded_inertias: tuple[np.ndarray, ...] = field(repr=False, default=())
+    inertias_per_payload_kg: tuple[np.ndarray, ...] = field(repr=False, default=())
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -127,15 +132,22 @@ def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str
         q_lock[full.joints[full.getJointId(j)].idx_q] = angle
     lock_ids = [full.getJointId(n) for n in names if n not in settings.joints]
     carrier, translation = _payload_placement(full, settings.payload_lever_m)
-    if settings.payload_kg > 0:
-        full.appendBodyToJoint(full.getJointId(carrier), pin.Inertia(settings.payload_kg, translation,
-                                                                     np.zeros((3, 3))), pin.SE3.Identity())
-    model = pin.buildReducedModel(full, lock_ids, q_lock)
+
+    def reduced(payload_kg: float) -> pin.Model:
+        loaded = full.copy()
+        if payload_kg > 0:
+            loaded.appendBodyToJoint(loaded.getJointId(carrier), pin.Inertia(payload_kg, translation, np.zeros((3, 3))),
+                                     pin.SE3.Identity())
+        return pin.buildReducedModel(loaded, lock_ids, q_lock)
+
+    model, unloaded, one_kg = reduced(settings.payload_kg), reduced(0.0), reduced(1.0)
     order = [list(model.names).index(j) for j in settings.joints]
     if order != sorted(order):
         raise InputError("arm", "joints", list(settings.joints), "list joints from shoulder to wrist")
     for j, value in (armature_kg_m2 or {}).items():
         model.armature[model.getJointId(j) - 1] = value
     locked = {full.names[i]: float(q_lock[full.joints[i].idx_q]) for i in lock_ids}
+    base = tuple(unloaded.inertias[i].matrix() for i in range(1, model.njoints))
+    per_kg = tuple(one_kg.inertias[i].matrix() - b for i, b in zip(range(1, model.njoints), base))
     log.debug("arm %s, payload %.1f kg at %s", settings.joints, settings.payload_kg, translation)
-    return Arm(settings, model, locked, carrier.replace("_joint", "_link"), translation)
+    return Arm(settings, model, locked, carrier.replace("_joint", "_link"), translation, base, per_kg)

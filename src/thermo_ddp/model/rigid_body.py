@@ -56,15 +56,20 @@ def _cross_force(v):
 
 
 class RigidBodyDynamics:
-    """CasADi RNEA/ABA for a fixed-base Pinocchio model with revolute joints (one DoF each)."""
+    """CasADi RNEA/ABA for a fixed-base Pinocchio model with revolute joints (one DoF each).
 
-    def __init__(self, model: pin.Model):
+    ``payload_inertias`` (optional): the spatial inertias (6x6 per joint) without the payload and per kg of
+    payload (:class:`thermo_ddp.model.arm.Arm`); each algorithm then takes a ``payload_kg`` (a number or a
+    CasADi symbol: a runtime parameter) and uses ``unloaded + payload_kg * per_kg`` instead of the model's."""
+
+    def __init__(self, model: pin.Model, payload_inertias: tuple | None = None):
         if model.nq != model.nv:
             raise NotImplementedError("only one-DoF revolute joints (nq == nv)")
         self.model = model
         self.nv = model.nv
         self._axes = [_axis(model.joints[i]) for i in range(1, model.njoints)]
         self._inertias = [_spatial_inertia(model.inertias[i]) for i in range(1, model.njoints)]
+        self._payload = payload_inertias
         self._armature = np.asarray(model.armature, dtype=float)
         self._a0 = np.concatenate([-np.asarray(model.gravity.linear), -np.asarray(model.gravity.angular)])
 
@@ -87,7 +92,16 @@ class RigidBodyDynamics:
             rot.append(rot[parent] @ ca.DM(place.rotation) @ _rotation(self._axes[i - 1], q[i - 1]))
         return rot, pos
 
-    def rnea(self, q, v, a):
+    def _inertia(self, i: int, payload_kg):
+        """Spatial inertia of body ``i`` (1-based), with ``payload_kg`` when given."""
+        if payload_kg is None:
+            return ca.DM(self._inertias[i - 1])
+        if self._payload is None:
+            raise ValueError("a payload_kg needs the payload_inertias of the model")
+        unloaded, per_kg = self._payload
+        return ca.DM(unloaded[i - 1]) + payload_kg * ca.DM(per_kg[i - 1])
+
+    def rnea(self, q, v, a, payload_kg=None):
         """Inverse dynamics tau = M(q) a + C(q, v) v + g(q) (armature included)."""
         xs, ss = self._transforms(q)
         parents = self.model.parents
@@ -97,7 +111,7 @@ class RigidBodyDynamics:
             vj = s * v[i - 1]
             vel[i] = x @ vel[parents[i]] + vj
             acc[i] = x @ acc[parents[i]] + s * a[i - 1] + _cross_motion(vel[i]) @ vj
-            inertia = ca.DM(self._inertias[i - 1])
+            inertia = self._inertia(i, payload_kg)
             forces[i] = inertia @ acc[i] + _cross_force(vel[i]) @ (inertia @ vel[i])
         tau = [None] * self.nv
         for i in range(self.model.njoints - 1, 0, -1):
@@ -106,7 +120,7 @@ class RigidBodyDynamics:
                 forces[parents[i]] = forces[parents[i]] + xs[i - 1].T @ forces[i]
         return ca.vertcat(*tau)
 
-    def aba(self, q, v, tau):
+    def aba(self, q, v, tau, payload_kg=None):
         """Forward dynamics a = M(q)^-1 (tau - C v - g), Featherstone's articulated-body algorithm."""
         xs, ss = self._transforms(q)
         parents = self.model.parents
@@ -117,7 +131,7 @@ class RigidBodyDynamics:
             x, s = xs[i - 1], ss[i - 1]
             vel[i] = x @ vel[parents[i]] + s * v[i - 1]
             bias_c[i] = _cross_motion(vel[i]) @ (s * v[i - 1])
-            ia[i] = ca.SX(ca.DM(self._inertias[i - 1]))
+            ia[i] = ca.SX(self._inertia(i, payload_kg))
             pa[i] = _cross_force(vel[i]) @ (ia[i] @ vel[i])
         u_vec, d, u = {}, {}, {}
         for i in range(n - 1, 0, -1):
@@ -139,16 +153,16 @@ class RigidBodyDynamics:
             acc[i] = a_prime + ss[i - 1] * qdd[i - 1]
         return ca.vertcat(*qdd)
 
-    def aba_derivatives(self, q, v, tau):
+    def aba_derivatives(self, q, v, tau, payload_kg=None):
         """(a, da/dq, da/dv, da/dtau) with da/dtau = M^-1 and da/d(q, v) = -M^-1 d rnea/d(q, v) at a.
 
         The identity (Carpentier & Mansard, RSS 2018) gives the same exact derivatives as
         differentiating ABA, in about 2.4x fewer operations for the 7-joint arm.
         """
-        acc = self.aba(q, v, tau)
+        acc = self.aba(q, v, tau, payload_kg)
         minv = ca.jacobian(acc, tau)  # ABA is affine in tau
         a_sym = ca.SX.sym("a", self.nv)
-        rnea = self.rnea(q, v, a_sym)
+        rnea = self.rnea(q, v, a_sym, payload_kg)
         drnea = ca.substitute(ca.horzcat(ca.jacobian(rnea, q), ca.jacobian(rnea, v)), a_sym, acc)
         da = -minv @ drnea
         return acc, da[:, :self.nv], da[:, self.nv:], minv

@@ -39,10 +39,15 @@ from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProble
 
 log = logging.getLogger(__name__)
 
-# Per-knot parameters of the lift: the angle to track and its weight, 1 on the hold's knots, the room.
-# ``direction``: the sign the velocity may take (the lift's, the lowering's), 0 while holding.
+# Per-knot parameters of the lift, so one compiled solver serves every request (issue 15): the angle to track
+# and its weight, 1 on the hold's knots, the room; ``direction``: the sign the velocity may take (the lift's,
+# the lowering's), 0 while holding; then every number of the request (payload, limit, angles, weights, motion
+# bounds), constant over the knots. Only the model's structure, the time step and the integrator are compiled.
+_REQUEST = ("payload_kg", "limit_c", "goal_rad", "start_rad", "hold_tolerance_rad", "velocity_limit_rad_s",
+            "energy_weight", "velocity_weight", "acceleration_weight", "stop_speed_rad_s", "stop_slope_per_s",
+            "one_way_tolerance_rad_s")
 LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
-                                  ("direction", 1)))
+                                  ("direction", 1), *((name, 1) for name in _REQUEST)))
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # Full DDP: the winding limit's R(T) i^2 curvature lives in the dynamics, which Gauss-Newton
@@ -149,8 +154,8 @@ class LiftProblem(TaskProblem):
 
 
 def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple[np.ndarray, tuple[int, int]]:
-    """Per-knot p = [q_ref, tracking weight, hold flag, ambient] for a hold of ``hold_s`` inside the
-    fixed horizon of ``settings.hold_s``: lift, hold, lower, then rest at the start until the end."""
+    """Per-knot parameters (:data:`LIFT_PARAMETERS`) for a hold of ``hold_s`` inside the horizon of
+    ``settings.hold_s``: lift, hold, lower, then rest at the start until the end."""
     k = settings.knots()
     hold = int(round(hold_s / settings.dt_s))
     s0, g = settings.start_rad, settings.goal_rad
@@ -165,26 +170,28 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     direction[:first] = np.sign(g - s0)               # lifting: toward the goal only
     direction[first + hold + 1:] = np.sign(s0 - g)    # lowering and resting: toward the start only
     p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
-                               hold_flag=flag, ambient_c=ambient_c, direction=direction)
+                               hold_flag=flag, ambient_c=ambient_c, direction=direction,
+                               **{name: getattr(settings, name) for name in _REQUEST})
     return p, (first, first + hold)
 
 
 def _functions(model: ActuatedArm, settings: LiftSettings):
+    """The lift's dynamics, costs and constraints. Every number of the request is read from the per-knot
+    parameters (:data:`LIFT_PARAMETERS`), so these functions depend only on the model's structure, the time
+    step, the integrator and ``careful_motion``: their compiled code serves every payload, limit and hold."""
     joint = model.joints[0]
     m = model.params[joint].motor
     x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", LIFT_PARAMETERS.size)
     par = LIFT_PARAMETERS.symbols(p)
     q, v = x[model.index(joint, "q_rad")], x[model.index(joint, "v_rad_s")]
     winding = x[model.index(joint, "winding_c")]
-    step = model.step(settings.dt_s, settings.integrator)
-    dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, par["ambient_c"])], ["x", "u", "p"], ["x_next"])
-    jac = model.step_jacobians(settings.dt_s, settings.integrator)
-    dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
+    env = ca.vertcat(par["ambient_c"], par["payload_kg"])
+    step = model.step(settings.dt_s, settings.integrator, runtime_payload=True)
+    dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, env)], ["x", "u", "p"], ["x_next"])
+    jac = model.step_jacobians(settings.dt_s, settings.integrator, runtime_payload=True)
+    dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, env)), ["x", "u", "p"],
                           ["x_next", "A", "B"])
-    vmax = settings.velocity_limit_rad_s
-    if vmax is None:
-        vmax = float(model.arm.model.velocityLimit[0])
-    tol, goal, start = settings.hold_tolerance_rad, settings.goal_rad, settings.start_rad
+    tol, goal, start = par["hold_tolerance_rad"], par["goal_rad"], par["start_rad"]
 
     def stage(name, expr, out="r"):
         return ca.Function(name, [x, u, p], [expr], ["x", "u", "p"], [out])
@@ -192,16 +199,16 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     def terminal(name, expr, out="r"):
         return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
 
-    acceleration = model.ode(x, u, par["ambient_c"])[model.index(joint, "v_rad_s")]
+    joule = motor.resistance_ohm(m, winding) * settings.dt_s
     costs = (
         Cost("tracking", 1.0, stage("tracking", ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"]))),
-        Cost("joule_energy", settings.energy_weight,
-             stage("joule_energy", ca.sqrt(motor.resistance_ohm(m, winding) * settings.dt_s) * u[0])),
-        Cost("velocity", settings.velocity_weight, stage("velocity", v)),
+        Cost("joule_energy", 1.0, stage("joule_energy", ca.sqrt(par["energy_weight"] * joule) * u[0])),
+        Cost("velocity", 1.0, stage("velocity", ca.sqrt(par["velocity_weight"]) * v)),
     )
-    terminal_costs = (Cost("terminal_tracking", settings.tracking_weight, terminal("terminal_tracking", q - start)),
-                      Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
-    limits = joint_limit_constraints(model, joint, x, u[0], settings.limit_c, vmax)
+    terminal_costs = (
+        Cost("terminal_tracking", 1.0, terminal("terminal_tracking", ca.sqrt(par["tracking_weight"]) * (q - start))),
+        Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
+    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"])
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
         Constraint("hold_band", stage("hold_band", ca.vertcat(par["hold_flag"] * (q - goal) - tol,
                                                              par["hold_flag"] * (goal - q) - tol), "g")),
@@ -211,13 +218,13 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         Constraint("return_band", terminal("return_band", ca.vertcat(q - start - tol, start - q - tol), "g")),
     )
     if settings.careful_motion:
-        still = settings.one_way_tolerance_rad_s
-        acceleration = model.ode(x, u, par["ambient_c"])[model.index(joint, "v_rad_s")]
-        costs += (Cost("acceleration", settings.acceleration_weight,
-                       stage("acceleration", ca.sqrt(settings.dt_s) * acceleration)),)
+        still = par["one_way_tolerance_rad_s"]
+        acceleration = model.runtime_payload_functions[0](x, u, env)[model.index(joint, "v_rad_s")]
+        costs += (Cost("acceleration", 1.0, stage("acceleration", ca.sqrt(par["acceleration_weight"] * settings.dt_s)
+                                                   * acceleration)),)
         constraints += (
             Constraint("stop_approach", stage("stop_approach", stop_approach(
-                model, joint, x, settings.stop_speed_rad_s, settings.stop_slope_per_s), "g")),
+                model, joint, x, par["stop_speed_rad_s"], par["stop_slope_per_s"]), "g")),
             Constraint("one_way", stage("one_way", ca.vertcat(-par["direction"] * v - still, par["hold_flag"] * v - still,
                                                               -par["hold_flag"] * v - still), "g")))
         terminal_constraints += (Constraint("terminal_rest", terminal("terminal_rest", ca.vertcat(v - still, -v - still),
@@ -230,7 +237,8 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
     limits = winding_limits_c(model, settings.limit_c)
     check_idle_below_limits(model, limits)
-    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]])
+    vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])  # default: the URDF's
+    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]], velocity_limit_rad_s=vmax)
     for name in ("start_rad", "goal_rad"):
         check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
