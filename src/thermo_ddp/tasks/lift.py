@@ -235,6 +235,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
+    require(model.arm.settings.payload_kg == settings.payload_kg, _SRC, "payload_kg", settings.payload_kg,
+            f"the model given carries {model.arm.settings.payload_kg:g} kg")
     limits = winding_limits_c(model, settings.limit_c)
     check_idle_below_limits(model, limits)
     vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])  # default: the URDF's
