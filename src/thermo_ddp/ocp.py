@@ -380,6 +380,14 @@ class OptimalControlProblem:
             raise InputError(source, "xs/us", "non-finite values", "warm start must be finite")
         return xs, us
 
+    def with_horizon(self, horizon: int) -> "OptimalControlProblem":
+        """The same problem over ``horizon`` knots, sharing the built :attr:`functions` (they do not depend
+        on the horizon)."""
+        other = dataclasses.replace(self, horizon=horizon)
+        if "functions" in self.__dict__:
+            other.__dict__["functions"] = self.functions
+        return other
+
     # -- symbolic building blocks (cached) --------------------------------------------------
     @functools.cached_property
     def functions(self) -> "ProblemFunctions":

@@ -8,6 +8,7 @@ and the planner all use these same functions.
 from __future__ import annotations
 
 import functools
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -17,6 +18,7 @@ import numpy as np
 
 from . import motor
 from .arm import Arm, ArmSettings, build_arm
+from .._memo import Memo
 from ..errors import InputError
 from .integrators import make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
 from .parameters import BOUNDS, Bound, JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict
@@ -26,6 +28,7 @@ from .thermal import ThermalNetwork, joint_heat_rhs, network_from_parameters
 _SRC = "model"
 STEP_S = Bound(1e-6, 10.0, "s", "an integration step: microseconds to seconds")
 MAX_STEPS = 2_000_000  # steps of one simulation: its states take nx * 8 bytes each
+_RUNTIME_PAYLOAD = Memo()  # structure_key -> runtime_payload_functions
 
 
 def check_integrator(source: str, integrator: str) -> str:
@@ -73,10 +76,22 @@ class ActuatedArm:
         return cls(arm, params, networks, *_build_functions(arm, params, networks))
 
     @functools.cached_property
+    def structure_key(self) -> str:
+        """Hash of everything this model's functions are built from but the payload's mass: models that
+        differ only in their payload share it (and their :attr:`runtime_payload_functions`)."""
+        arm = self.arm
+        text = repr((sorted((j, p.to_dict()) for j, p in self.params.items()), arm.settings.robot, arm.joints,
+                     sorted(arm.locked_joints.items()), np.asarray(arm.model.gravity.linear).tolist(),
+                     arm.payload_frame, arm.payload_translation_m.tolist(), sorted(self.networks.items())))
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+    @property
     def runtime_payload_functions(self) -> tuple[ca.Function, ca.Function]:
         """``ode`` and ``ode_jacobians`` with the payload as a runtime input: the third input is
-        ``ambient_payload`` = [ambient_c, payload_kg] (this model's own payload is not used)."""
-        return _build_functions(self.arm, self.params, self.networks, runtime_payload=True)[:2]
+        ``ambient_payload`` = [ambient_c, payload_kg] (this model's own payload is not used). Built once
+        per :attr:`structure_key` in a process."""
+        return _RUNTIME_PAYLOAD.get(self.structure_key, lambda: _build_functions(
+            self.arm, self.params, self.networks, runtime_payload=True)[:2])
 
     # --- names and layout -------------------------------------------------------------
     @property
@@ -169,10 +184,15 @@ class ActuatedArm:
         return step_jacobians(self.step(dt_s, integrator, runtime_payload))
 
     def static_current_a(self, q) -> np.ndarray:
-        """Currents that hold posture ``q`` at rest (gravity only; friction is zero at v = 0)."""
-        g = self.arm.gravity_torque_nm(self._vector("q", q, self.nu, "rad"))
-        return np.array([float(motor.current_for_torque_a(self.params[j].motor, g[k]))
-                         for k, j in enumerate(self.joints)])
+        """Currents that hold posture ``q`` (nu,) at rest, or each row of postures (K, nu) (gravity only;
+        friction is zero at v = 0)."""
+        rows = np.atleast_2d(_finite_array("q", q, f"shape ({self.nu},) or (K, {self.nu}) in rad"))
+        if np.ndim(q) > 2 or rows.shape[1] != self.nu:
+            raise InputError(_SRC, "q", f"shape {np.shape(q)}", f"expected ({self.nu},) or (K, {self.nu}) in rad")
+        g = self.arm.gravity_torque_nm(rows)
+        current = np.column_stack([np.asarray(motor.current_for_torque_a(self.params[j].motor, g[:, k]), float).ravel()
+                                   for k, j in enumerate(self.joints)])
+        return current if np.ndim(q) == 2 else current[0]
 
     def simulate(self, x0, current_a, dt_s: float, integrator: str = "rk4", ambient_c=None) -> "Trajectory":
         """Plant simulation with zero-order-hold currents ``current_a`` of shape (N, nu)."""

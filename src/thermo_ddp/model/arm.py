@@ -100,7 +100,12 @@ class Arm:
                 "frame": self.payload_frame, "translation_m": self.payload_translation_m.tolist()}
 
     def gravity_torque_nm(self, q: np.ndarray) -> np.ndarray:
-        return pin.computeGeneralizedGravity(self.model, self.model.createData(), np.asarray(q, float))
+        """Gravity torques at posture ``q`` (nv,), or at each row of ``q`` (K, nv)."""
+        q = np.asarray(q, float)
+        data = self.model.createData()
+        if q.ndim == 1:
+            return pin.computeGeneralizedGravity(self.model, data, q)
+        return np.array([pin.computeGeneralizedGravity(self.model, data, row) for row in q])
 
 
 def _payload_placement(full: pin.Model, lever_m: float) -> tuple[str, np.ndarray]:

@@ -189,7 +189,7 @@ def initial_guess(tp: TaskProblem) -> WarmStart:
     q_ref = tp.params[:, tp.problem.parameters.slice("q_ref_rad")]
     xs = np.tile(tp.x0, (q_ref.shape[0], 1))
     xs[:, [tp.model.index(j, "q_rad") for j in tp.model.joints]] = q_ref
-    us = np.array([tp.model.static_current_a(q) for q in q_ref[:-1]])
+    us = tp.model.static_current_a(q_ref[:-1])
     return WarmStart(xs, us)
 
 

@@ -26,6 +26,7 @@ import casadi as ca
 import numpy as np
 
 from .._config import require, settings_from_mapping
+from .._memo import Memo
 from ..model import motor
 from ..model.actuated import ActuatedArm, check_integrator, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG
@@ -232,6 +233,22 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
 
 
+_PROBLEMS = Memo()  # the lift's OCP by what its functions are built from (the horizon aside)
+
+
+def _structure(model: ActuatedArm, settings: LiftSettings) -> OptimalControlProblem:
+    """The lift's OCP for the model's structure, the step, the integrator and ``careful_motion`` (built once
+    in a process, with its :attr:`OptimalControlProblem.functions`); its horizon is set by the caller."""
+    def build():
+        dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
+        problem = OptimalControlProblem(dyn, 1, costs, tcosts, cons, tcons, u_lb=[-peak], u_ub=[peak], name="lift",
+                                        dynamics_jacobians=dyn_jac, parameters=LIFT_PARAMETERS)
+        problem.functions  # built here, shared by every horizon
+        return problem
+
+    return _PROBLEMS.get((model.structure_key, settings.dt_s, settings.integrator, settings.careful_motion), build)
+
+
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
     files = {ELBOW: settings.parameter_file} if settings.parameter_file else None
     model = model or load_model((ELBOW,), payload_kg=settings.payload_kg, parameter_files=files)
@@ -244,9 +261,7 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
     for name in ("start_rad", "goal_rad"):
         check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
-    dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
-    problem = OptimalControlProblem(dyn, params.shape[0] - 1, costs, tcosts, cons, tcons, u_lb=[-peak], u_ub=[peak],
-                                    name="lift", dynamics_jacobians=dyn_jac, parameters=LIFT_PARAMETERS)
+    problem = _structure(model, settings).with_horizon(params.shape[0] - 1)
     x0 = model.state(q=[settings.start_rad])
     return LiftProblem(model=model, problem=problem, x0=x0, params=params,
                        time_s=np.arange(params.shape[0]) * settings.dt_s, box_names=("current_peak",),
