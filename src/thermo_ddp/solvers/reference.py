@@ -32,6 +32,7 @@ class ReferenceSettings:
     tolerance: float = 1e-8
     constraint_tolerance: float = 1e-8
     print_level: int = 0
+    expand: bool = True         # expand the NLP to SX: slower to set up, faster to evaluate (MX when False)
     plugin_options: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
@@ -42,6 +43,7 @@ class ReferenceSettings:
             require(isinstance(v, (int, float)) and np.isfinite(v) and v > 0, _SRC, name, v, "expected a number > 0")
         require(isinstance(self.print_level, int) and 0 <= self.print_level <= 12, _SRC, "print_level",
                 self.print_level, "expected an integer in 0..12")
+        require(isinstance(self.expand, bool), _SRC, "expand", self.expand, "expected True or False")
         require(isinstance(self.plugin_options, Mapping), _SRC, "plugin_options", self.plugin_options,
                 "expected a mapping")
 
@@ -69,7 +71,7 @@ class _NlpSolver:
 
     def _solver(self, warm_duals: bool) -> ca.Function:
         if warm_duals not in self._solvers:
-            opts = {"expand": True, **self._options(warm_duals)}
+            opts = {"expand": self.settings.expand, **self._options(warm_duals)}
             self._solvers[warm_duals] = ca.nlpsol(f"{self.plugin}_{self.problem.name}", self.plugin, self.tr.nlp, opts)
         return self._solvers[warm_duals]
 
