@@ -182,14 +182,19 @@ def _structure(problem):
     return [f.serialize() for f in funs] + [c.weight.tobytes() for c in problem.costs + problem.terminal_costs]
 
 
-def test_every_number_of_a_request_is_a_runtime_parameter():
-    """Two requests that share nothing but the model, the step and the integrator build the same functions
-    (so one compiled solver serves both); the payload read from the parameters is the model's own."""
+@pytest.mark.parametrize("careful", [False, True], ids=["plain", "careful_motion"])
+def test_every_number_of_a_request_is_a_runtime_parameter(careful):
+    """Two requests that share nothing but the model, the step, the integrator and careful_motion build the
+    same functions (so one compiled solver serves both); the payload read from the parameters is the model's."""
+    import dataclasses
     from thermo_ddp.model.actuated import load_model
-    a = build_lift_problem(LiftSettings(payload_kg=40.0, limit_c=84.0, hold_s=3.0))
-    b = build_lift_problem(LiftSettings(payload_kg=25.0, limit_c=120.0, hold_s=9.0, goal_rad=-1.2, start_rad=-0.1,
-                                        energy_weight=0.5, velocity_weight=0.2, tracking_weight=10.0,
-                                        hold_tolerance_rad=0.05, velocity_limit_rad_s=2.0))
+    first = LiftSettings(payload_kg=40.0, limit_c=84.0, hold_s=3.0, careful_motion=careful)
+    numbers = {f.name: getattr(first, f.name) for f in dataclasses.fields(LiftSettings)
+               if isinstance(getattr(first, f.name), float) and f.name not in ("dt_s", "payload_kg", "limit_c")}
+    other = {name: value * 0.9 for name, value in numbers.items()}  # every other number of the request changed
+    a = build_lift_problem(first)
+    b = build_lift_problem(LiftSettings(payload_kg=25.0, limit_c=120.0, careful_motion=careful,
+                                        velocity_limit_rad_s=2.0, **other))
     assert a.problem.horizon != b.problem.horizon
     assert _structure(a.problem) == _structure(b.problem)
     own = load_model(payload_kg=25.0).step(b.settings.dt_s, b.settings.integrator)
