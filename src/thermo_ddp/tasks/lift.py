@@ -8,7 +8,7 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
   ``return_band`` (back down at the end); the current box |i| <= peak;
-- with ``careful_motion``, the motion a careful operator would ask for: the cost ``acceleration`` (smooth
+- with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost ``acceleration`` (smooth
   phases: the joint acceleration of the model's ODE) and the constraints ``stop_approach`` (the speed near a
   joint stop shrinks with the distance to it), ``one_way`` (the lift moves only toward the goal, the hold is
   still, the lowering only toward the start: up, hold, down and no other reversal) and ``terminal_rest``.
@@ -96,9 +96,11 @@ class LiftSettings:
     tracking_weight: float = 100.0
     energy_weight: float = 1e-2
     velocity_weight: float = 1e-2
-    careful_motion: bool = False        # the acceleration cost and the stop_approach, one_way, terminal_rest
-                                        # constraints (off by default: they cost the solvers 10-25x, issue 15)
-    acceleration_weight: float = 1e-3   # per (rad/s^2)^2 s: smooth phases
+    careful_motion: bool = True         # the acceleration cost and the stop_approach, one_way, terminal_rest
+                                        # constraints (issue 15)
+    acceleration_weight: float = 0.1    # per (rad/s^2)^2 s: smooth phases; measured against 1e-3 on the 40 kg
+                                        # longest-hold searches: 28 % (84 °C) and 35 % (140 °C) fewer DDP
+                                        # backward passes, the same holds (benchmarks/README.md)
     stop_speed_rad_s: float = 0.1       # the speed toward a joint stop allowed at the stop,
     stop_slope_per_s: float = 2.0       #   growing by this per rad of distance from it
     one_way_tolerance_rad_s: float = 0.01   # the speed against a phase's direction allowed (and at the end)
@@ -293,6 +295,13 @@ class HoldSearch:
         return sum(r.solve_s for _, r in self.probes.values())
 
 
+def _trajectories(result: SolverResult) -> WarmStart:
+    """A probe's warm start: the neighbour's trajectories only. Its multipliers come with the penalty that
+    solve ended at (1e6 and more near the boundary): DDP restarted there crawled (the 84 °C careful search
+    took 769 backward and 3,503 forward passes with them, 445 and 1,107 without; benchmarks/README.md)."""
+    return WarmStart(result.xs, result.us)
+
+
 def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSearch:
     """The longest hold, up to the requested one (the fixed horizon), that the solver finds feasible.
 
@@ -306,7 +315,7 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSea
         if knots not in probes:
             probe = lp.with_hold(knots * lp.settings.dt_s)
             done = [k for k, (_, r) in probes.items() if is_feasible(r)]
-            warm = WarmStart.from_result(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
+            warm = _trajectories(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
             probes[knots] = (probe, solve(probe, solver, warm))
             log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
         return is_feasible(probes[knots][1])
