@@ -400,9 +400,10 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     if settings.find_longest_hold:
         search = longest_feasible_hold(lp, solver, time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c))
         (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
+        every = [r for _, r in search.probes.values()]
     else:
         result = solve(lp, solver)
-        total, solves, knots = result.solve_s, 1, top if is_feasible(result) else -1
+        total, solves, knots, every = result.solve_s, 1, top if is_feasible(result) else -1, [result]
     achieved = max(knots, 0) * settings.dt_s
     if knots == top:
         status, message, achieved = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C", hold_s
@@ -418,7 +419,7 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
         message += f"; binding: {', '.join(binding)}"
     ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
     return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
-                    result.us, lp.model, solver_summary(result, total, solves, name=settings.solver), binding, ttl)
+                    result.us, lp.model, solver_summary(result, total, solves, every, name=settings.solver), binding, ttl)
 
 
 @dataclasses.dataclass(frozen=True)
