@@ -5,8 +5,8 @@
    140 °C limit (inactive: the plan peaks near 95 °C) and a 94 °C limit (active during the hold).
    Each solver cold (from lift.initial_guess, as plan_lift starts) and warm: from its own solution
    of the neighbouring problem, the same lift with the hold one knot shorter (the previous probe
-   of plan_lift's longest-hold search); DDP takes that solution's trajectories, AL multipliers and
-   penalty, IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
+   of plan_lift's longest-hold search); DDP takes that solution's trajectories (lift.neighbour_warm_start,
+   as the search does), IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
    Reported: median wall time of ``solve`` (and the solver's own clock), iterations, final cost,
    max violation, status, cost difference to IPOPT's cold optimum; DDP's time ratio N=800 / N=100.
 2. plan_lift: whole cold calls (problem and solver built inside; DDP's compiled code comes from
@@ -30,7 +30,8 @@ import time
 from _common import write
 from _ocp_bench import SCENARIO, SCENARIO_S, lift_problem, nlp_warm_start, row, timed_solves
 from thermo_ddp.tasks._common import DEFAULT_HOLD_S, MotionQuality
-from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, initial_guess, make_solver, plan_lift
+from thermo_ddp.tasks.lift import (LiftSettings, binding_constraints, initial_guess, make_solver,
+                                   neighbour_warm_start, plan_lift)
 
 KNOTS = (100, 200, 400, 800)
 LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}
@@ -51,7 +52,7 @@ def bench_knots(knots: int, limit_c: float, repeats: int) -> dict:
         cold, t_cold = timed_solves(lambda: solver.solve(lp.x0, lp.params, initial_guess(lp)), repeats)
         reference = cold if name == "ipopt" else reference
         previous = solver.solve(neighbour.x0, neighbour.params, initial_guess(neighbour))
-        warm_start = nlp_warm_start(previous)
+        warm_start = neighbour_warm_start(previous) if name == "ddp" else nlp_warm_start(previous)
         solver.solve(lp.x0, lp.params, warm_start)  # untimed: IPOPT builds its dual-warm-start instance here
         warm, t_warm = timed_solves(lambda: solver.solve(lp.x0, lp.params, warm_start), repeats)
         out[name] = {"build_s": build_s, "cold": row(cold, t_cold), "warm": row(warm, t_warm),

@@ -295,10 +295,14 @@ class HoldSearch:
         return sum(r.solve_s for _, r in self.probes.values())
 
 
-def _trajectories(result: SolverResult) -> WarmStart:
-    """A probe's warm start: the neighbour's trajectories only. Its multipliers come with the penalty that
-    solve ended at (1e6 and more near the boundary): DDP restarted there crawled (the 84 °C careful search
-    took 769 backward and 3,503 forward passes with them, 445 and 1,107 without; benchmarks/README.md)."""
+def neighbour_warm_start(result: SolverResult) -> WarmStart:
+    """The warm start of a lift from the solution of the same lift with another hold: its trajectories only.
+
+    Its multipliers sit on the other hold's knots (the lowering is shifted) and come with the penalty that
+    solve ended at (1e6 near the boundary): DDP restarted with them crawled or stalled (the 84 °C careful
+    search: 769 backward and 3,503 forward passes with them, 445 and 1,107 without; one knot longer hold at
+    94 °C, N = 200: 200 iterations without convergence, 36 without them). IPOPT's searches took as many
+    iterations either way."""
     return WarmStart(result.xs, result.us)
 
 
@@ -315,7 +319,7 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSea
         if knots not in probes:
             probe = lp.with_hold(knots * lp.settings.dt_s)
             done = [k for k, (_, r) in probes.items() if is_feasible(r)]
-            warm = _trajectories(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
+            warm = neighbour_warm_start(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
             probes[knots] = (probe, solve(probe, solver, warm))
             log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
         return is_feasible(probes[knots][1])
