@@ -279,6 +279,8 @@ class DDPSolver:
             alpha, trial, mu_gap, tries = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
             counts["forward_passes"] += tries
             if trial is None:
+                if has_constraints and abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)):
+                    inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
                 reg = self._increase(reg)
                 log.debug("iteration %d: line search failed, reg -> %.1e", iteration, reg)
                 if reg > s.reg_max:
