@@ -19,6 +19,11 @@ Method (each part stated, as logged):
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
+  A failed line search whose model predicts no decrease above rounding (|d1| <= ``decrement_tolerance``
+  * (1 + |cost|)) ends the inner loop: the multipliers are updated at the next pass (measured: the
+  stalled probes of the lift's longest-hold search otherwise spent 14 forward passes per retry, raising
+  the regularisation up to reg_max). Passes and updates are counted in ``SolverResult.info``
+  (:data:`PASS_COUNTS`).
 - Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
   and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
   of a too optimistic model); on a failed backward pass multiplied by ``reg_factor`` or, with
