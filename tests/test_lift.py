@@ -89,6 +89,17 @@ def test_cli_plan_writes_json_and_four_panel_plot(tmp_path, capsys):
     assert "FEASIBLE" in capsys.readouterr().out
 
 
+def test_cli_plan_careful_motion_is_on_unless_turned_off(tmp_path):
+    """`plan` plans carefully by default (its constraints show up as binding on a short 20 kg lift);
+    --no-careful-motion leaves them out of the problem."""
+    binding = {}
+    for flag in ([], ["--no-careful-motion"]):
+        out = tmp_path / f"plan{len(flag)}.json"
+        assert main(["plan", "--payload-kg", "20", "--hold-s", "2", "--json", str(out), *flag]) == 0
+        binding[bool(flag)] = set(json.loads(out.read_text())["binding_constraints"])
+    assert {"one_way", "stop_approach"} <= binding[False] and not binding[True] & {"one_way", "stop_approach"}
+
+
 def test_cli_plan_bad_model_file_exits_2(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text("[joint]\nname = 'arm_left_4_joint'\n")
@@ -169,6 +180,16 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     m = MotionQuality.of(plan.time_s, q, v, lo, hi)
     assert m.reversals == plan.motion.reversals == 1 and m.inside_range and plan.motion.inside_range
     assert plan.motion.max_speed_near_stop_rad_s == pytest.approx(m.max_speed_near_stop_rad_s, abs=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("limit_c", [84.0, 140.0])
+def test_default_plan_holds_as_long_with_ddp_as_with_ipopt(limit_c):
+    """The whole default search (careful motion on) with either solver: the same longest hold, to one knot.
+    Slow (IPOPT's search takes tens of seconds); the optimum of one careful solve is compared fast below."""
+    ddp, ipopt = plan_lift(40.0, limit_c), plan_lift(40.0, limit_c, solver="ipopt")
+    assert ddp.status == ipopt.status == "infeasible_hold"
+    assert abs(ddp.achieved_hold_s - ipopt.achieved_hold_s) <= ddp.settings.dt_s + 1e-9
 
 
 def test_careful_motion_constraints_matter_and_ddp_finds_ipopts_optimum():
