@@ -304,7 +304,7 @@ class DDPSolver:
                       stat, gap, alpha, reg, rho)
             if alpha == 1.0 and stat <= s.tolerance ** 0.5 and \
                     self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho) <= s.constraint_tolerance:
-                counts["gradient_passes"] += 1  # the step closed the gaps: a first-order pass may already show convergence
+                counts["gradient_passes"] += 1  # the step closed the gaps: a first-order pass may show convergence
                 stat_new, a = be.gradient(it_.X, it_.U, P, lam, lamN, policy, rho)
                 if stat_new <= s.tolerance:
                     status = "converged"

@@ -8,10 +8,11 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
   ``return_band`` (back down at the end); the current box |i| <= peak;
-- with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost ``acceleration`` (smooth
-  phases: the joint acceleration of the model's ODE) and the constraints ``stop_approach`` (the speed near a
-  joint stop shrinks with the distance to it), ``one_way`` (the lift moves only toward the goal, the hold is
-  still, the lowering only toward the start: up, hold, down and no other reversal) and ``terminal_rest``.
+- with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
+  ``acceleration`` (smooth phases: the joint acceleration of the model's ODE) and the constraints
+  ``stop_approach`` (the speed near a joint stop shrinks with the distance to it), ``one_way`` (the lift moves
+  only toward the goal, the hold is still, the lowering only toward the start: up, hold, down and no other
+  reversal) and ``terminal_rest``.
 When the requested hold is infeasible, the longest feasible hold is found by bisection over
 complete optimisations (each a feasibility verdict of the solver), not guessed.
 """
@@ -422,8 +423,9 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     if status != "feasible" and binding:
         message += f"; binding: {', '.join(binding)}"
     ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
+    summary = solver_summary(result, total, solves, every, name=settings.solver)
     return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
-                    result.us, lp.model, solver_summary(result, total, solves, every, name=settings.solver), binding, ttl)
+                    result.us, lp.model, summary, binding, ttl)
 
 
 @dataclasses.dataclass(frozen=True)
