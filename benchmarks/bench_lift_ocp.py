@@ -5,13 +5,18 @@
    140 °C limit (inactive: the plan peaks near 95 °C) and a 94 °C limit (active during the hold).
    Each solver cold (from lift.initial_guess, as plan_lift starts) and warm: from its own solution
    of the neighbouring problem, the same lift with the hold one knot shorter (the previous probe
-   of plan_lift's longest-hold search); DDP takes that solution's trajectories, AL multipliers and
-   penalty, IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
+   of plan_lift's longest-hold search); DDP takes that solution's trajectories (lift.neighbour_warm_start,
+   as the search does), IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
    Reported: median wall time of ``solve`` (and the solver's own clock), iterations, final cost,
    max violation, status, cost difference to IPOPT's cold optimum; DDP's time ratio N=800 / N=100.
 2. plan_lift: whole cold calls (problem and solver built inside; DDP's compiled code comes from
    the on-disk cache, filled by one untimed call first): a feasible plan (40 kg, 140 °C, 20 s hold)
-   and an infeasible one (40 kg, 84 °C, 30 s hold) that runs the longest-hold search.
+   and the default plans of 40 kg under 84 °C and 140 °C (60 s requested, careful motion on), cut short
+   by the winding: the longest-hold search runs. Reported per solver: wall time, achieved hold, and the
+   work of all solves (iterations; DDP: backward and forward passes, multiplier updates); DDP also with
+   careful motion off (what careful motion costs).
+
+Every problem is the lift's default transcription (``LiftSettings``: careful motion on).
 
     python benchmarks/bench_lift_ocp.py [--repeats 5] [--quick]
 """
@@ -24,12 +29,15 @@ import time
 
 from _common import write
 from _ocp_bench import SCENARIO, SCENARIO_S, lift_problem, nlp_warm_start, row, timed_solves
-from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, initial_guess, make_solver, plan_lift
+from thermo_ddp.tasks._common import DEFAULT_HOLD_S, MotionQuality
+from thermo_ddp.tasks.lift import (LiftSettings, binding_constraints, initial_guess, make_solver,
+                                   neighbour_warm_start, plan_lift)
 
 KNOTS = (100, 200, 400, 800)
 LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}
 SOLVERS = ("ddp", "ipopt", "fatrop")
-PLANS = {"feasible_40kg_140c_hold20s": (40.0, 140.0, 20.0), "infeasible_40kg_84c_hold30s": (40.0, 84.0, 30.0)}
+PLANS = {"feasible_40kg_140c_hold20s": (40.0, 140.0, 20.0), "default_40kg_84c": (40.0, 84.0, DEFAULT_HOLD_S),
+         "default_40kg_140c": (40.0, 140.0, DEFAULT_HOLD_S)}
 
 
 def bench_knots(knots: int, limit_c: float, repeats: int) -> dict:
@@ -44,7 +52,7 @@ def bench_knots(knots: int, limit_c: float, repeats: int) -> dict:
         cold, t_cold = timed_solves(lambda: solver.solve(lp.x0, lp.params, initial_guess(lp)), repeats)
         reference = cold if name == "ipopt" else reference
         previous = solver.solve(neighbour.x0, neighbour.params, initial_guess(neighbour))
-        warm_start = nlp_warm_start(previous)
+        warm_start = neighbour_warm_start(previous) if name == "ddp" else nlp_warm_start(previous)
         solver.solve(lp.x0, lp.params, warm_start)  # untimed: IPOPT builds its dual-warm-start instance here
         warm, t_warm = timed_solves(lambda: solver.solve(lp.x0, lp.params, warm_start), repeats)
         out[name] = {"build_s": build_s, "cold": row(cold, t_cold), "warm": row(warm, t_warm),
@@ -63,24 +71,32 @@ def bench_knots(knots: int, limit_c: float, repeats: int) -> dict:
 
 
 def bench_plan(payload_kg: float, limit_c: float, hold_s: float, repeats: int) -> dict:
-    """Whole plan_lift calls per solver; the ratio IPOPT / DDP of wall and solver time."""
+    """Whole plan_lift calls per solver (and DDP without careful motion); the ratio IPOPT / DDP of wall and
+    solver time, the achieved holds' difference in knots."""
     out = {"payload_kg": payload_kg, "limit_c": limit_c, "hold_s": hold_s}
-    for name in ("ddp", "ipopt"):
+    for label, name, careful in (("ddp", "ddp", True), ("ipopt", "ipopt", True), ("ddp_careful_off", "ddp", False)):
         walls, plan = [], None
         for _ in range(repeats):
             start = time.perf_counter()
-            plan = plan_lift(payload_kg, limit_c, hold_s, solver=name)
+            plan = plan_lift(payload_kg, limit_c, hold_s, solver=name, careful_motion=careful)
             walls.append(time.perf_counter() - start)
-        out[name] = {"wall_median_s": statistics.median(walls), "wall_min_s": min(walls), "repeats": repeats,
-                     "solve_s": plan.solver["total_solve_s"], "solves": plan.solver["solves"],
-                     "status": plan.status, "achieved_hold_s": plan.achieved_hold_s,
-                     "iterations_last": plan.solver["iterations"], "cost": plan.solver["cost"],
-                     "max_violation": plan.solver["max_constraint_violation"]}
-        print(f"  plan_lift {payload_kg:g} kg {limit_c:g} °C hold {hold_s:g} s {name:>5}: "
-              f"{out[name]['wall_median_s']:.3f} s wall, {out[name]['solve_s']:.3f} s in {plan.solver['solves']} "
-              f"solve(s), {plan.status}, hold {plan.achieved_hold_s:.1f} s", flush=True)
+        m: MotionQuality = plan.motion
+        out[label] = {"wall_median_s": statistics.median(walls), "wall_min_s": min(walls), "repeats": repeats,
+                      "solve_s": plan.solver["total_solve_s"], "solves": plan.solver["solves"],
+                      "status": plan.status, "achieved_hold_s": plan.achieved_hold_s, "work": plan.solver["work"],
+                      "iterations_last": plan.solver["iterations"], "cost": plan.solver["cost"],
+                      "max_violation": plan.solver["max_constraint_violation"],
+                      "motion": {"reversals": m.reversals, "max_speed_near_stop_rad_s": m.max_speed_near_stop_rad_s,
+                                 "final_speed_rad_s": m.final_speed_rad_s, "inside_range": m.inside_range,
+                                 "max_acceleration_rad_s2": m.max_acceleration_rad_s2}}
+        print(f"  plan_lift {payload_kg:g} kg {limit_c:g} °C hold {hold_s:g} s {label:>15}: "
+              f"{out[label]['wall_median_s']:.3f} s wall, {out[label]['solve_s']:.3f} s in {plan.solver['solves']} "
+              f"solve(s), {plan.status}, hold {plan.achieved_hold_s:.1f} s, work {plan.solver['work']}", flush=True)
     out["ipopt_over_ddp_wall"] = out["ipopt"]["wall_median_s"] / out["ddp"]["wall_median_s"]
     out["ipopt_over_ddp_solve"] = out["ipopt"]["solve_s"] / out["ddp"]["solve_s"]
+    out["careful_over_careful_off_ddp_wall"] = out["ddp"]["wall_median_s"] / out["ddp_careful_off"]["wall_median_s"]
+    dt = LiftSettings().dt_s
+    out["hold_knots_ddp_minus_ipopt"] = round((out["ddp"]["achieved_hold_s"] - out["ipopt"]["achieved_hold_s"]) / dt)
     return out
 
 
@@ -93,11 +109,12 @@ def run(repeats: int, quick: bool) -> dict:
         for kind in ("cold", "warm"):
             t = {n: cases[label][str(n)]["ddp"][kind]["wall_median_s"] for n in knots}
             cases[label][f"ddp_{kind}_time_ratio_800_over_100"] = t[800] / t[100]
-    for args in PLANS.values():  # untimed: fills DDP's on-disk code cache for both horizons
-        plan_lift(*args, solver="ddp")
+    for args in PLANS.values():  # untimed: fills DDP's on-disk code cache for every horizon, careful or not
+        for careful in (True, False):
+            plan_lift(*args, solver="ddp", careful_motion=careful)
     plans = {label: bench_plan(*args, repeats=1 if quick else max(2, repeats // 2)) for label, args in PLANS.items()}
-    return {"description": "elbow + thermal lift OCP, DDP (full second order, codegen) vs IPOPT vs fatrop; "
-                           "median wall time of solve(); plan_lift whole calls",
+    return {"description": "elbow + thermal lift OCP (careful motion on), DDP (full second order, codegen) vs IPOPT "
+                           "vs fatrop; median wall time of solve(); plan_lift whole calls",
             "scenario": {**SCENARIO, "duration_s": SCENARIO_S, "dt_s": "20 s / N",
                          "integrator": LiftSettings().integrator},
             "limits_c": LIMITS_C, "repeats": repeats, "lift": cases, "plan_lift": plans}

@@ -37,17 +37,21 @@ def lift_tables(data: dict) -> list[str]:
                              f"| {ratios[0]} | {ratios[1]} |")
         lines.append(f"\nDDP time N=800 / N=100: cold {case['ddp_cold_time_ratio_800_over_100']:.1f}x, "
                      f"warm {case['ddp_warm_time_ratio_800_over_100']:.1f}x.")
-    lines += ["\n**plan_lift, whole cold calls** (median wall s; solver time summed over the solves)\n",
-              "| case | solver | wall s | solver s | solves | status | hold s | IPOPT / DDP wall "
-              "| IPOPT / DDP solver |",
-              "|---|---|---|---|---|---|---|---|---|"]
+    lines += ["\n**plan_lift, whole cold calls** (median wall s; solver time and work summed over the solves: "
+              "iterations, DDP's backward / forward passes and multiplier updates)\n",
+              "| case | solver | wall s | solver s | solves | status | hold s | iterations | backward / forward "
+              "/ updates | reversals | v near stop rad/s | IPOPT / DDP wall | IPOPT / DDP solver |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, case in data["plan_lift"].items():
-        for name in ("ddp", "ipopt"):
-            r = case[name]
-            ratio = ("", "") if name == "ddp" else (f"{case['ipopt_over_ddp_wall']:.1f}",
-                                                    f"{case['ipopt_over_ddp_solve']:.1f}")
+        for name in ("ddp", "ipopt", "ddp_careful_off"):
+            r, w, m = case[name], case[name]["work"], case[name]["motion"]
+            ratio = ("", "") if name != "ipopt" else (f"{case['ipopt_over_ddp_wall']:.1f}",
+                                                      f"{case['ipopt_over_ddp_solve']:.1f}")
+            passes = " / ".join(str(w[k]) for k in ("backward_passes", "forward_passes", "multiplier_updates")
+                                if k in w)
             lines.append(f"| {label} | {name} | {r['wall_median_s']:.3f} | {r['solve_s']:.3f} | {r['solves']} | "
-                         f"{r['status']} | {r['achieved_hold_s']:.1f} | {ratio[0]} | {ratio[1]} |")
+                         f"{r['status']} | {r['achieved_hold_s']:.1f} | {w['iterations']} | {passes} "
+                         f"| {m['reversals']} | {m['max_speed_near_stop_rad_s']:.2f} | {ratio[0]} | {ratio[1]} |")
     return lines
 
 

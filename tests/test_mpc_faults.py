@@ -166,3 +166,22 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
     assert fallbacks[0.0] >= 10, hard.message            # the scenario does stress the hard band
     assert fallbacks[1e4] <= fallbacks[0.0] / 10, fallbacks
     assert soft.success and soft.margin_c > 0 and soft.hold_s[-1] >= hard.hold_s[-1]
+
+
+def test_careful_motion_planner_keeps_planning_a_hotter_plant():
+    """Careful motion in the planner (off by default) on the default plant, 15 % hotter than planned: its
+    one_way and stop_approach bind from x_1 on (as the winding limit), so a measured speed against the phase's
+    direction or near the stop does not make re-solves infeasible at knot 0 (16 of 165 periods fell back with
+    them on x_0). The true winding stays under the limit; the executed approach to the stop is slow, the arm at
+    rest at the end."""
+    from thermo_ddp.tasks._common import MotionQuality, joint_range_rad
+
+    r = run(careful_motion=True)
+    lp = planning_problem(r.settings, build_models(r.settings)[0])
+    names = {c.name for c in lp.problem.constraints}
+    assert {"one_way_next", "stop_approach_next", "winding_limit_next"} <= names and "one_way" not in names
+    assert_safe(r)
+    assert r.step_status.count("fallback") <= 0.03 * len(r.step_status), r.message
+    lo, hi = (b[0] for b in joint_range_rad(lp.model))
+    m = MotionQuality.of(r.time_s, r.q_rad, r.v_rad_s, lo, hi)
+    assert m.max_speed_near_stop_rad_s <= 0.3 and m.final_speed_rad_s <= 0.01 and m.inside_range

@@ -285,8 +285,9 @@ def _plan_parser(name: str, description: str) -> _Parser:
                                                          "models/arm_left_4_joint.toml)")
         cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
         cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
-        cmd.add_argument("--careful-motion", action="store_true", help="flag: one direction per phase, slow near "
-                         "the joint stops, at rest at the end, an acceleration cost (LiftSettings.careful_motion)")
+        cmd.add_argument("--careful-motion", action=argparse.BooleanOptionalAction, default=True,
+                         help="flag, on by default (--no-careful-motion: off): one direction per phase, slow near the "
+                              "joint stops, at rest at the end, an acceleration cost (LiftSettings.careful_motion)")
     else:
         cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=None,
                          help="winding limits to compare, °C (default: the elbow file's safety_cutoff_c and "

@@ -52,11 +52,13 @@ class ControlStep:
 
 
 def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
-    """The lift OCP of the controller: ``horizon_knots`` knots at the control period, limit backed off."""
+    """The lift OCP of the controller: ``horizon_knots`` knots at the control period, limit backed off,
+    careful motion only when ``settings.controller.careful_motion`` asks for it."""
     settings = settings.with_default_limit(default_limit_c(model.params[model.joints[0]]))
     base = LiftSettings(payload_kg=settings.scenario.payload_kg, limit_c=settings.planning_limit_c,
                         dt_s=settings.controller.control_period_s, integrator=settings.controller.integrator,
-                        parameter_file=settings.scenario.parameter_file)
+                        parameter_file=settings.scenario.parameter_file,
+                        careful_motion=settings.controller.careful_motion)
     room = settings.controller.horizon_knots * base.dt_s - base.lift_s - base.lower_s - base.settle_s
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
@@ -65,14 +67,21 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     return dataclasses.replace(lp, problem=problem)
 
 
+# Stage constraints on the state alone, moved from x_k to x_{k+1} in the receding-horizon planner.
+ON_NEXT_STATE = ("winding_limit", "stop_approach", "one_way")
+
+
 def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float) -> OptimalControlProblem:
-    """The lift OCP with the stage winding limit moved from x_k to x_{k+1} = f(x_k, u_k, p_k), and its
-    back-off made soft when ``backoff_weight`` > 0.
+    """The lift OCP with the stage constraints of :data:`ON_NEXT_STATE` moved from x_k to
+    x_{k+1} = f(x_k, u_k, p_k) (renamed ``<name>_next``), and the winding's back-off made soft when
+    ``backoff_weight`` > 0.
 
     The set of constrained states is then x_1..x_N (x_N also by the terminal limit): the same as
     the lift's except the measured present state x_0, which no control can change. Without this,
     an estimate a few mK over the limit (plant mismatch during one period) makes every re-solve
-    infeasible at knot 0.
+    infeasible at knot 0; with careful motion, so does a measured speed against the phase's direction or
+    near a stop (measured on the +15 % resistance plant at 84 °C: 16 fallback periods with them at x_0, 1
+    moved).
 
     Soft back-off: the winding is held hard under the task's limit (the planning limit + ``backoff_c``) and
     the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
@@ -83,10 +92,10 @@ def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backo
     x_next = problem.dynamics(x, u, p)
     constraints, costs = [], list(problem.costs)
     for c in problem.constraints:
-        if c.name == "winding_limit":
-            c = Constraint("winding_limit_next", ca.Function("winding_limit_next", [x, u, p],
-                                                             [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
-            if backoff_weight > 0:
+        if c.name in ON_NEXT_STATE:
+            name = f"{c.name}_next"
+            c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
+            if c.name == "winding_limit_next" and backoff_weight > 0:
                 costs.append(c.penalty(backoff_weight, "winding_backoff"))
                 c = c.shifted(backoff_c)
         constraints.append(c)

@@ -19,6 +19,11 @@ Method (each part stated, as logged):
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
+  A failed line search whose model predicts no decrease above rounding (|d1| <= ``decrement_tolerance``
+  * (1 + |cost|)) ends the inner loop: the multipliers are updated at the next pass (measured: the
+  stalled probes of the lift's longest-hold search otherwise spent 14 forward passes per retry, raising
+  the regularisation up to reg_max). Passes and updates are counted in ``SolverResult.info``
+  (:data:`PASS_COUNTS`).
 - Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
   and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
   of a too optimistic model); on a failed backward pass multiplied by ``reg_factor`` or, with
@@ -62,6 +67,9 @@ from .result import HISTORY_KEYS, SolverResult, WarmStart, constraint_violation
 log = logging.getLogger(__name__)
 
 BACKENDS = ("codegen", "casadi", "numpy")
+# The work of a solve, in SolverResult.info: backward (Riccati) passes, forward (rollout) passes of the line
+# search, first-order gradient passes, augmented-Lagrangian multiplier updates.
+PASS_COUNTS = ("backward_passes", "forward_passes", "gradient_passes", "multiplier_updates")
 _SRC = "DDPSettings"
 
 
@@ -234,9 +242,10 @@ class DDPSolver:
         hist = {k: [] for k in HISTORY_KEYS}
         status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
         policy = values = costates = None
-        iteration = passes = inner = checks = 0
-        while iteration < s.max_iterations and passes < 4 * s.max_iterations + 20:
-            passes += 1
+        iteration = inner = 0
+        counts = dict.fromkeys(PASS_COUNTS, 0)  # the work done: passes of each kind, multiplier updates
+        while iteration < s.max_iterations and counts["backward_passes"] < 4 * s.max_iterations + 20:
+            counts["backward_passes"] += 1
             policy_try, summary, values_try = first or be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
             first = None
             d1, d2, stat, pivot = summary
@@ -270,9 +279,13 @@ class DDPSolver:
                                    f"the penalty grew {s.infeasibility_growth:g}x")
                         break
                     lam, lamN, rho, viol_prev = self._update_multipliers(it_, lam, lamN, rho, viol_prev)
+                    counts["multiplier_updates"] += 1
                     continue
-            alpha, trial, mu_gap = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
+            alpha, trial, mu_gap, tries = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
+            counts["forward_passes"] += tries
             if trial is None:
+                if has_constraints and abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)):
+                    inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
                 reg = self._increase(reg)
                 log.debug("iteration %d: line search failed, reg -> %.1e", iteration, reg)
                 if reg > s.reg_max:
@@ -291,7 +304,7 @@ class DDPSolver:
                       stat, gap, alpha, reg, rho)
             if alpha == 1.0 and stat <= s.tolerance ** 0.5 and \
                     self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho) <= s.constraint_tolerance:
-                checks += 1  # the step closed the gaps: a first-order pass may already show convergence
+                counts["gradient_passes"] += 1  # the step closed the gaps: a first-order pass may show convergence
                 stat_new, a = be.gradient(it_.X, it_.U, P, lam, lamN, policy, rho)
                 if stat_new <= s.tolerance:
                     status = "converged"
@@ -304,7 +317,7 @@ class DDPSolver:
         if costates is None and values is not None:
             costates = self.layout.costates(values)
         return self._result(it_, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
-                            hist, passes, checks)
+                            hist, counts)
 
     def _increase(self, reg: float, policy=None) -> float:
         """reg x reg_factor; after a failed backward pass (``policy``) at least reg - 2 p, with p the
@@ -341,7 +354,7 @@ class DDPSolver:
         return lam, lamN, rho, viol
 
     def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap):
-        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty)."""
+        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty, forward passes)."""
         s, be = self.settings, self.backend
         gap_l1 = float(np.sum(np.abs(it_.C)))
         if gap_l1 > 0:
@@ -349,17 +362,18 @@ class DDPSolver:
             mu_gap = max(mu_gap, need + 1e-8)
         merit0 = it_.J + self._al(it_.G, it_.GN, lam, lamN, rho) + mu_gap * gap_l1
         noise = 1e-13 * (1.0 + abs(merit0))
-        alpha = 1.0
+        alpha, tries = 1.0, 0
         while alpha >= s.line_search_min_step:
+            tries += 1
             X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
             if np.isfinite(J) and np.all(np.isfinite(X)):
                 merit = J + self._al(G, GN, lam, lamN, rho) + mu_gap * (1 - alpha) * gap_l1
                 model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
                 if merit - merit0 <= s.armijo * min(model, 0.0) + noise:
                     C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
-                    return alpha, _Iterate(X, U, J, G, GN, C), mu_gap
+                    return alpha, _Iterate(X, U, J, G, GN, C), mu_gap, tries
             alpha *= s.line_search_factor
-        return alpha, None, mu_gap
+        return alpha, None, mu_gap, tries
 
     def _record(self, hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha):
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, self.problem.u_lb, self.problem.u_ub)
@@ -368,8 +382,8 @@ class DDPSolver:
                            ("reg", reg), ("alpha", alpha), ("penalty", rho)):
             hist[key].append(float(value))
 
-    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist, passes=0,
-                checks=0) -> SolverResult:
+    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist,
+                counts: Mapping[str, int] | None = None) -> SolverResult:
         pr = self.problem
         solve_s = time.perf_counter() - start
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
@@ -389,5 +403,5 @@ class DDPSolver:
                             xs=it_.X.copy(), us=it_.U.copy(), cost=float(it_.J) if finite else float("inf"),
                             max_constraint_violation=viol,
                             iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
-                            info={"backend": self.backend.name, "backward_passes": passes, "gradient_passes": checks,
+                            info={"backend": self.backend.name, **(counts or dict.fromkeys(PASS_COUNTS, 0)),
                                   "full_second_order": self.settings.full_second_order})

@@ -8,10 +8,11 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
   ``return_band`` (back down at the end); the current box |i| <= peak;
-- with ``careful_motion``, the motion a careful operator would ask for: the cost ``acceleration`` (smooth
-  phases: the joint acceleration of the model's ODE) and the constraints ``stop_approach`` (the speed near a
-  joint stop shrinks with the distance to it), ``one_way`` (the lift moves only toward the goal, the hold is
-  still, the lowering only toward the start: up, hold, down and no other reversal) and ``terminal_rest``.
+- with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
+  ``acceleration`` (smooth phases: the joint acceleration of the model's ODE) and the constraints
+  ``stop_approach`` (the speed near a joint stop shrinks with the distance to it), ``one_way`` (the lift moves
+  only toward the goal, the hold is still, the lowering only toward the start: up, hold, down and no other
+  reversal) and ``terminal_rest``.
 When the requested hold is infeasible, the longest feasible hold is found by bisection over
 complete optimisations (each a feasibility verdict of the solver), not guessed.
 """
@@ -102,9 +103,11 @@ class LiftSettings:
     tracking_weight: float = 100.0
     energy_weight: float = 1e-2
     velocity_weight: float = 1e-2
-    careful_motion: bool = False        # the acceleration cost and the stop_approach, one_way, terminal_rest
-                                        # constraints (off by default: they cost the solvers 10-25x, issue 15)
-    acceleration_weight: float = 1e-3   # per (rad/s^2)^2 s: smooth phases
+    careful_motion: bool = True         # the acceleration cost and the stop_approach, one_way, terminal_rest
+                                        # constraints (issue 15)
+    acceleration_weight: float = 0.1    # per (rad/s^2)^2 s: smooth phases; measured against 1e-3 on the 40 kg
+                                        # longest-hold searches: 28 % (84 °C) and 35 % (140 °C) fewer DDP
+                                        # backward passes, the same holds (benchmarks/README.md)
     stop_speed_rad_s: float = 0.1       # the speed toward a joint stop allowed at the stop,
     stop_slope_per_s: float = 2.0       #   growing by this per rad of distance from it
     one_way_tolerance_rad_s: float = 0.01   # the speed against a phase's direction allowed (and at the end)
@@ -318,6 +321,17 @@ class HoldSearch:
         return sum(r.solve_s for _, r in self.probes.values())
 
 
+def neighbour_warm_start(result: SolverResult) -> WarmStart:
+    """The warm start of a lift from the solution of the same lift with another hold: its trajectories only.
+
+    Its multipliers sit on the other hold's knots (the lowering is shifted) and come with the penalty that
+    solve ended at (1e6 near the boundary): DDP restarted with them crawled or stalled (the 84 °C careful
+    search: 769 backward and 3,503 forward passes with them, 445 and 1,107 without; one knot longer hold at
+    94 °C, N = 200: 200 iterations without convergence, 36 without them). IPOPT's searches took as many
+    iterations either way."""
+    return WarmStart(result.xs, result.us)
+
+
 def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSearch:
     """The longest hold, up to the requested one (the fixed horizon), that the solver finds feasible.
 
@@ -331,7 +345,7 @@ def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSea
         if knots not in probes:
             probe = lp.with_hold(knots * lp.settings.dt_s)
             done = [k for k, (_, r) in probes.items() if is_feasible(r)]
-            warm = WarmStart.from_result(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
+            warm = neighbour_warm_start(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
             probes[knots] = (probe, solve(probe, solver, warm))
             log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
         return is_feasible(probes[knots][1])
@@ -416,9 +430,10 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     if settings.find_longest_hold:
         search = longest_feasible_hold(lp, solver, time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c))
         (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
+        every = [r for _, r in search.probes.values()]
     else:
         result = solve(lp, solver)
-        total, solves, knots = result.solve_s, 1, top if is_feasible(result) else -1
+        total, solves, knots, every = result.solve_s, 1, top if is_feasible(result) else -1, [result]
     achieved = max(knots, 0) * settings.dt_s
     if knots == top:
         status, message, achieved = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C", hold_s
@@ -433,8 +448,9 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     if status != "feasible" and binding:
         message += f"; binding: {', '.join(binding)}"
     ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
+    summary = solver_summary(result, total, solves, every, name=settings.solver)
     return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
-                    result.us, lp.model, solver_summary(result, total, solves, name=settings.solver), binding, ttl)
+                    result.us, lp.model, summary, binding, ttl)
 
 
 @dataclasses.dataclass(frozen=True)
