@@ -161,11 +161,12 @@ def test_fused_first_pass_and_first_order_pass_agree_with_the_full_passes(boxed,
 
 def test_compiled_passes_are_found_again_without_rebuilding(monkeypatch):
     """A second solver for the same problem loads the library through the pass index (no symbolic
-    build); another weight gives another key."""
+    build); another control bound gives another key."""
     from thermo_ddp.solvers import _backends, _pass_cache
     first = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
+    assert first.info["backend"] == "codegen"
     assert _pass_cache.load(_pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())) is not None
-    monkeypatch.setattr(_backends, "build_passes", lambda *a: pytest.fail("passes rebuilt"))
+    monkeypatch.setattr(_backends, "knot_functions", lambda *a: pytest.fail("knot functions rebuilt"))
     again = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
     assert again.iterations == first.iterations
     np.testing.assert_array_equal(again.us, first.us)
