@@ -174,6 +174,27 @@ def test_compiled_passes_are_found_again_without_rebuilding(monkeypatch):
         _pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())
 
 
+def test_a_new_horizon_calls_no_compiler(monkeypatch):
+    """The compiled code depends on the structure only: after one build, problems of other horizons load
+    the same library (no compiler, no symbolic build) and solve to the Riccati optimum of their horizon."""
+    import subprocess
+
+    from thermo_ddp import codegen
+    from thermo_ddp.solvers import _backends, _pass_cache
+    assert DDPSolver(lq_problem()).backend.name == "codegen"
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: pytest.fail("compiler called"))
+    monkeypatch.setattr(codegen, "_build", lambda *a, **k: pytest.fail("library built"))
+    monkeypatch.setattr(_backends, "knot_functions", lambda *a, **k: pytest.fail("knot functions rebuilt"))
+    for horizon in (7, 2 * N + 3):
+        assert _pass_cache.key(lq_problem(horizon=horizon), DDPSettings()) == _pass_cache.key(lq_problem(),
+                                                                                              DDPSettings())
+        res = DDPSolver(lq_problem(horizon=horizon)).solve(X0)
+        xs, us, gains = riccati(horizon)
+        assert res.success and res.info["backend"] == "codegen" and res.iterations == 1
+        np.testing.assert_allclose(res.us, us, atol=1e-8)
+        np.testing.assert_allclose(res.K, gains, atol=1e-8)
+
+
 def test_failed_backward_pass_raises_the_regularisation_past_the_first_failed_pivot():
     solver = DDPSolver(lq_problem(), DDPSettings(backend="casadi", pivot_jump=True))
     lay = solver.layout

@@ -6,8 +6,10 @@ changed model, driver or option never loads a stale library. Cache folder: ``$TH
 ``~/.cache/thermo_ddp``.
 
 Build: each function's C goes to its own file; the files are compiled to objects in parallel (up to
-``os.cpu_count()`` compilers) and linked. A generated file above ``LARGE_SOURCE_BYTES`` is compiled
-at -O1 (gcc's time and memory grow steeply with the size of one function at -O2).
+``os.cpu_count()`` compilers, the longest first) and linked. gcc's time grows steeply with the size
+of one function at -O2, so a generated file above ``LARGE_SOURCE_BYTES`` is compiled at -O1 and one
+above ``HUGE_SOURCE_BYTES`` at -O0 (measured on this machine: -O2 0.03-0.08, -O1 0.16, -O0 0.7 MB of
+generated C per second; runtime cost in benchmarks/README.md).
 
 The cache is bounded: after a build pushes the libraries over ``$THERMO_DDP_CACHE_MAX_MB`` (default
 2000), the least recently used ones are removed. Each use stamps a library's access time (its
@@ -40,7 +42,9 @@ log = logging.getLogger(__name__)
 DEFAULT_FLAGS = ("-O2",)
 DEFAULT_CACHE_MAX_MB = 2000.0
 EVICTION_GRACE_S = 60.0  # far longer than finding and loading a library takes
-LARGE_SOURCE_BYTES = 4_000_000  # generated C above this is compiled at -O1 (see benchmarks/README.md)
+LARGE_SOURCE_BYTES = 1_500_000  # generated C above this is compiled at -O1 ...
+HUGE_SOURCE_BYTES = 8_000_000  # ... above this at -O0
+_SECONDS_PER_MB = {"-O0": 1.4, "-O1": 6.0}  # gcc on generated C, else ~15 (-O2): the order of the compilations
 _LIBRARY_GLOB = "*_" + "[0-9a-f]" * 20 + ".so"  # what library_path names; nothing else is removed
 _INDEX_GLOB = "ddp_passes_*.txt"  # solvers' index of compiled passes (see solvers/_pass_cache.py)
 
@@ -159,7 +163,7 @@ def library_path(functions: Mapping[str, ca.Function], flags=DEFAULT_FLAGS,
     digest = hashlib.sha256()
     digest.update(ca.__version__.encode())
     digest.update(" ".join(flags).encode())
-    digest.update(str(LARGE_SOURCE_BYTES).encode())
+    digest.update(f"{LARGE_SOURCE_BYTES} {HUGE_SOURCE_BYTES}".encode())
     if any("native" in f for f in flags):
         digest.update(_host_tag().encode())
     for name in sorted(functions):
@@ -223,23 +227,26 @@ def _generate(fn: ca.Function, folder: Path) -> Path:
 
 
 def source_flags(size_bytes: int, flags) -> list[str]:
-    """The compiler flags for a C file of this size: optimisation lowered to -O1 above LARGE_SOURCE_BYTES."""
+    """The compiler flags for a generated C file of this size: -O1 above LARGE_SOURCE_BYTES, -O0 above
+    HUGE_SOURCE_BYTES (in place of the flags' own optimisation level)."""
     if size_bytes <= LARGE_SOURCE_BYTES:
         return list(flags)
-    return [f for f in flags if not f.startswith("-O")] + ["-O1"]
+    return [f for f in flags if not f.startswith("-O")] + ["-O0" if size_bytes > HUGE_SOURCE_BYTES else "-O1"]
 
 
 def _compile_objects(files: list[Path], cc: str, flags) -> list[Path]:
-    """Compile the C files to position-independent objects, largest first, up to cpu_count at once."""
-    def compile_one(source: Path) -> Path:
-        obj = source.with_suffix(".o")
-        subprocess.run([cc, *source_flags(source.stat().st_size, flags), "-fPIC", "-c", "-o", str(obj),
-                        str(source)], check=True, capture_output=True)
-        return obj
+    """Compile the C files to position-independent objects, up to cpu_count at once, the longest first."""
+    def command(source: Path) -> list[str]:
+        return [cc, *source_flags(source.stat().st_size, flags), "-fPIC", "-c", "-o", str(source.with_suffix(".o")),
+                str(source)]
 
-    largest_first = sorted(files, key=lambda f: -f.stat().st_size)
+    def expected_s(source: Path) -> float:
+        level = next((f for f in reversed(command(source)) if f.startswith("-O")), "-O2")
+        return source.stat().st_size / 1e6 * _SECONDS_PER_MB.get(level, 15.0)
+
+    longest_first = sorted(files, key=expected_s, reverse=True)
     with ThreadPoolExecutor(max_workers=min(len(files), os.cpu_count() or 1)) as pool:
-        list(pool.map(compile_one, largest_first))
+        list(pool.map(lambda f: subprocess.run(command(f), check=True, capture_output=True), longest_first))
     return [f.with_suffix(".o") for f in files]
 
 

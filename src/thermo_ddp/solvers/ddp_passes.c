@@ -11,6 +11,8 @@
 #include <string.h>
 
 typedef long long int casadi_int; /* CasADi's default (generated code: #define casadi_int long long int) */
+typedef int (*knot_fn)(const double **, double **, casadi_int *, double *, int);
+typedef int (*work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
 
 #define KNOT_FUNCTION(name)                                                                      \
     int name(const double **arg, double **res, casadi_int *iw, double *w, int mem);             \
@@ -22,7 +24,13 @@ KNOT_FUNCTION(ddp_fwd_knot)
 KNOT_FUNCTION(ddp_eval_knot)
 KNOT_FUNCTION(ddp_terminal)
 
-typedef int (*work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
+/* Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
+ * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
+ * Gauss-Newton). ddp_back_knot then takes them as its last input. */
+extern const int ddp_n_hess;
+extern const knot_fn ddp_hess[];
+extern const work_fn ddp_hess_work[];
+extern const int ddp_hess_size[];
 
 /* Work space of one solver: the knot functions' argument/result pointers and work arrays (sized by
  * their *_work functions), the problem's sizes and a terminal value vector. */
@@ -32,6 +40,7 @@ typedef struct {
     casadi_int *iw;
     double *w;
     double *value_end;
+    double *hess;
     int nx, nu, np, ng, ngN, n_value, n_policy;
 } Work;
 
@@ -42,20 +51,27 @@ void ddp_work_free(Work *W) {
     free(W->iw);
     free(W->w);
     free(W->value_end);
+    free(W->hess);
     free(W);
+}
+
+static void grow(work_fn size, casadi_int *n_arg, casadi_int *n_res, casadi_int *n_iw, casadi_int *n_w) {
+    casadi_int a = 0, r = 0, iw = 0, w = 0;
+    size(&a, &r, &iw, &w);
+    *n_arg = a > *n_arg ? a : *n_arg;
+    *n_res = r > *n_res ? r : *n_res;
+    *n_iw = iw > *n_iw ? iw : *n_iw;
+    *n_w = w > *n_w ? w : *n_w;
 }
 
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
     work_fn sizes[] = {ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
-    casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0;
-    for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) {
-        casadi_int a = 0, r = 0, iw = 0, w = 0;
-        sizes[i](&a, &r, &iw, &w);
-        n_arg = a > n_arg ? a : n_arg;
-        n_res = r > n_res ? r : n_res;
-        n_iw = iw > n_iw ? iw : n_iw;
-        n_w = w > n_w ? w : n_w;
+    casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
+    for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
+    for (int k = 0; k < ddp_n_hess; ++k) {
+        grow(ddp_hess_work[k], &n_arg, &n_res, &n_iw, &n_w);
+        n_hess += ddp_hess_size[k];
     }
     Work *W = calloc(1, sizeof(Work));
     if (!W) return NULL;
@@ -67,7 +83,8 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
     W->iw = calloc(n_iw + 1, sizeof(casadi_int));
     W->w = calloc(n_w + 1, sizeof(double));
     W->value_end = calloc(W->n_value, sizeof(double));
-    if (!W->arg || !W->res || !W->iw || !W->w || !W->value_end) {
+    W->hess = calloc(n_hess + 1, sizeof(double));
+    if (!W->arg || !W->res || !W->iw || !W->w || !W->value_end || !W->hess) {
         ddp_work_free(W);
         return NULL;
     }
@@ -101,9 +118,18 @@ static int value_end(Work *W, int N, const double *X, const double *P, const dou
 /* One Riccati step at knot t: values[t], policy[t] from values[t+1] and the gap c_t. */
 static int back_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
                      const double *c, const double *rho, const double *reg, double *policy, double *values) {
-    W->arg[0] = values + (size_t)(t + 1) * W->n_value;
-    W->arg[1] = X + (size_t)t * W->nx, W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np;
-    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = c, W->arg[6] = rho, W->arg[7] = reg;
+    const double *S = values + (size_t)(t + 1) * W->n_value, *x = X + (size_t)t * W->nx;
+    const double *u = U + (size_t)t * W->nu, *p = P + (size_t)t * W->np;
+    double *hess = W->hess;
+    for (int k = 0; k < ddp_n_hess; ++k) {
+        W->arg[0] = S, W->arg[1] = c, W->arg[2] = x, W->arg[3] = u, W->arg[4] = p;
+        W->res[0] = hess;
+        int rc = ddp_hess[k](W->arg, W->res, W->iw, W->w, 0);
+        if (rc) return rc;
+        hess += ddp_hess_size[k];
+    }
+    W->arg[0] = S, W->arg[1] = x, W->arg[2] = u, W->arg[3] = p;
+    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = c, W->arg[6] = rho, W->arg[7] = reg, W->arg[8] = W->hess;
     W->res[0] = values + (size_t)t * W->n_value, W->res[1] = policy + (size_t)t * W->n_policy;
     return ddp_back_knot(W->arg, W->res, W->iw, W->w, 0);
 }
