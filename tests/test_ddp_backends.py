@@ -101,3 +101,23 @@ def test_lift_requests_of_other_durations_share_one_library():
     keys = {_pass_cache.key(build_lift_problem(LiftSettings(hold_s=h, limit_c=84.0)).problem, DDPSettings())
             for h in (2.0, 3.5, 10.0)}
     assert len(keys) == 1 and None not in keys
+
+
+def test_second_order_chunks_reassemble_the_hessian(monkeypatch):
+    """Full DDP with the second-order term split into one compiled chunk per column (as a big model's
+    is): the same backward pass as numpy's with the whole Hessian."""
+    import ctypes
+
+    from thermo_ddp.solvers import _backends
+    monkeypatch.setattr(_backends, "HESSIAN_CHUNK_NODES", 1)
+    problem, xs, us, P, _ = _pendulum()
+    compiled = DDPSolver(problem, DDPSettings(backend="codegen", full_second_order=True)).backend
+    vm = DDPSolver(problem, DDPSettings(backend="numpy", full_second_order=True)).backend
+    assert compiled.name == "codegen"
+    assert ctypes.c_int.in_dll(compiled._lib, "ddp_n_hess").value == problem.nx + problem.nu
+    X, U = xs + 0.1, us - 0.5
+    lam, lamN = np.full((problem.horizon, problem.n_constraints), 0.5), np.full(problem.n_terminal_constraints, 0.5)
+    C = vm.evaluate(X, U, P)[3]
+    got = compiled.backward(X, U, P, lam, lamN, C, RHO, 1.0)
+    assert got[1][3] > 0
+    _close(got, vm.backward(X, U, P, lam, lamN, C, RHO, 1.0))
