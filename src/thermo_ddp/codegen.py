@@ -244,9 +244,15 @@ def _compile_objects(files: list[Path], cc: str, flags) -> list[Path]:
         level = next((f for f in reversed(command(source)) if f.startswith("-O")), "-O2")
         return source.stat().st_size / 1e6 * _SECONDS_PER_MB.get(level, 15.0)
 
+    def run(source: Path) -> None:
+        start = time.perf_counter()
+        subprocess.run(command(source), check=True, capture_output=True)
+        log.debug("%s (%.1f MB, %s): %.1f s", source.name, source.stat().st_size / 1e6,
+                  " ".join(source_flags(source.stat().st_size, flags)), time.perf_counter() - start)
+
     longest_first = sorted(files, key=expected_s, reverse=True)
     with ThreadPoolExecutor(max_workers=min(len(files), os.cpu_count() or 1)) as pool:
-        list(pool.map(lambda f: subprocess.run(command(f), check=True, capture_output=True), longest_first))
+        list(pool.map(run, longest_first))
     return [f.with_suffix(".o") for f in files]
 
 

@@ -71,14 +71,18 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     model = knot_model(F, x, u, p, lam, rho, settings.full_second_order)
     second = model.pop("second_order_sym", None)
     knots = {"model": model, "second": second, "syms": (x, u, p, lam, lamN, rho)}
-    knots["back_core"], knots["back"], knots["terminal"] = _backward_knot(problem, settings, layout, knots, compiled)
-    knots["grad"] = _gradient_knot(problem, layout, knots)
+    knots["local"], model_in = _local_model_knot(problem, knots)
+    knots["back_core"], knots["back"], knots["terminal"] = _backward_knot(problem, settings, layout, knots, model_in,
+                                                                          compiled)
+    knots["grad_core"], knots["grad"] = _gradient_knot(problem, layout, knots, model_in, compiled)
     knots["fwd"] = _forward_knot(problem, layout, x, p)
     knots["eval"], knots["end"] = _evaluation_knots(problem, x, u, p)
     return knots
 
 
-COMPILED = ("back_core", "terminal", "grad", "fwd", "eval", "end")  # the knots the C driver calls (and "hess")
+# The knots the C driver calls (and "hess"): the local model once per knot, then the Riccati or first-order step.
+COMPILED = ("local", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
+MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
 
@@ -88,15 +92,30 @@ def _function(name, inputs, outputs, names_in, names_out, cse=True):
     return ca.Function(name, inputs, [ca.densify(o) for o in outputs], names_in, names_out, _CSE if cse else {})
 
 
-def _backward_knot(problem, settings, layout, knots, compiled):
-    """One Riccati step (compiled core, and composed) and the terminal value function. Full DDP: the
-    core takes the dynamics' second-order term H = d2(v'f)/dz2 (z = [x; u], v = a + b + Vxx c) as an
-    input ``hess``, computed by the ``hess`` chunk functions (see _hessian_chunks); the composed step
-    (the VM's) calls them inside."""
+def _local_model_knot(problem, knots):
+    """The knot's local model [vec(A); vec(B); lx; lu; vec(lxx); vec(luu); vec(lux)] (one compiled function,
+    shared by the backward and first-order steps) and the same as a dict of parts of an input symbol."""
+    x, u, p, lam, _, rho = knots["syms"]
+    parts = [ca.densify(knots["model"][name]) for name in MODEL_PARTS]
+    local = _function("ddp_local_knot", [x, u, p, lam, rho], [ca.vertcat(*[ca.vec(m) for m in parts])],
+                      ["x", "u", "p", "lam", "rho"], ["model"])
+    packed = problem.functions.symbolic.sym("model", local.nnz_out(0))
+    model_in, offset = {}, 0
+    for name, m in zip(MODEL_PARTS, parts):
+        model_in[name] = ca.reshape(packed[offset: offset + m.numel()], m.shape)
+        offset += m.numel()
+    return local, (packed, model_in)
+
+
+def _backward_knot(problem, settings, layout, knots, model_in, compiled):
+    """One Riccati step from the packed local model (compiled core; composed with the local model for the
+    VM unless ``compiled``) and the terminal value function. Full DDP: the core takes the dynamics'
+    second-order term H = d2(v'f)/dz2 (z = [x; u], v = a + b + Vxx c) as an input ``hess`` (empty in
+    Gauss-Newton), computed by the ``hess`` chunk functions (see _hessian_chunks)."""
     F, nx, nz = problem.functions, problem.nx, problem.nx + problem.nu
     x, u, p, lam, lamN, rho = knots["syms"]
     reg, c, S = F.symbolic.sym("reg"), F.symbolic.sym("c", nx), F.symbolic.sym("S", layout.n_value)
-    model = dict(knots["model"])
+    packed, model = model_in[0], dict(model_in[1])
     chunks = _hessian_chunks(problem, layout, x, u, p) if settings.full_second_order else []
     hess = F.symbolic.sym("hess", sum(f.nnz_out(0) for f, _ in chunks))
     if chunks:
@@ -108,14 +127,13 @@ def _backward_knot(problem, settings, layout, knots, compiled):
                        settings.box_iterations, problem.has_box)
     S_prev = ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"]))
     policy = ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])
-    names = ["S", "x", "u", "p", "lam", "c", "rho", "reg"]
-    back = _function("ddp_back_knot", [S, x, u, p, lam, c, rho, reg] + ([hess] if chunks else []), [S_prev, policy],
-                     names + (["hess"] if chunks else []), ["S_prev", "policy"])
+    back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
+                     ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
-    composed = back if not chunks or compiled else ca.Function(
-        "ddp_back_knot", [S, x, u, p, lam, c, rho, reg],
-        back(S, x, u, p, lam, c, rho, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])), names,
-        ["S_prev", "policy"], _CSE)
+    composed = None if compiled else ca.Function(
+        "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
+        back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
+        ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
     S_N = ca.vertcat(term["lx"], ca.DM.zeros(nx), ca.vec(term["lxx"]))
     terminal = _function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"])
@@ -142,16 +160,21 @@ def _hessian_chunks(problem, layout, x, u, p):
     return chunks
 
 
-def _gradient_knot(problem, layout, knots):
-    """First-order backward step with given gains (see _riccati.gradient_step)."""
+def _gradient_knot(problem, layout, knots, model_in, compiled):
+    """First-order backward step with given gains (see _riccati.gradient_step) from the packed local
+    model (compiled core) and composed with the local model (VM)."""
     nx, nu = problem.nx, problem.nu
     x, u, p, lam, _, rho = knots["syms"]
     a, pol = problem.functions.symbolic.sym("a", nx), problem.functions.symbolic.sym("policy", layout.n_policy)
     K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
-    a_prev, stat = gradient_step(SymOps, knots["model"], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
+    a_prev, stat = gradient_step(SymOps, model_in[1], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
                                  problem.has_box)
-    return _function("ddp_grad_knot", [a, x, u, p, lam, rho, pol], [a_prev, stat],
-                     ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"])
+    core = _function("ddp_grad_knot", [a, model_in[0], u, pol], [a_prev, stat], ["a", "model", "u", "policy"],
+                     ["a_prev", "stat"])
+    composed = None if compiled else ca.Function("ddp_grad_composed", [a, x, u, p, lam, rho, pol],
+                           core(a, knots["local"](x, u, p, lam, rho), u, pol),
+                           ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"], _CSE)
+    return core, composed
 
 
 def _forward_knot(problem, layout, x, p):

@@ -17,16 +17,21 @@ typedef int (*work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
 #define KNOT_FUNCTION(name)                                                                      \
     int name(const double **arg, double **res, casadi_int *iw, double *w, int mem);             \
     int name##_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+KNOT_FUNCTION(ddp_local_knot)
 KNOT_FUNCTION(ddp_back_knot)
 KNOT_FUNCTION(ddp_back_terminal)
 KNOT_FUNCTION(ddp_grad_knot)
 KNOT_FUNCTION(ddp_fwd_knot)
 KNOT_FUNCTION(ddp_eval_knot)
 KNOT_FUNCTION(ddp_terminal)
+const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 
-/* Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
+/* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
+ * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and
+ * ddp_grad_knot(a, model, u, policy).
+ * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
  * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
- * Gauss-Newton). ddp_back_knot then takes them as its last input. */
+ * Gauss-Newton): the input hess of ddp_back_knot. */
 extern const int ddp_n_hess;
 extern const knot_fn ddp_hess[];
 extern const work_fn ddp_hess_work[];
@@ -40,6 +45,7 @@ typedef struct {
     casadi_int *iw;
     double *w;
     double *value_end;
+    double *model;
     double *hess;
     int nx, nu, np, ng, ngN, n_value, n_policy;
 } Work;
@@ -51,6 +57,7 @@ void ddp_work_free(Work *W) {
     free(W->iw);
     free(W->w);
     free(W->value_end);
+    free(W->model);
     free(W->hess);
     free(W);
 }
@@ -64,8 +71,13 @@ static void grow(work_fn size, casadi_int *n_arg, casadi_int *n_res, casadi_int 
     *n_w = w > *n_w ? w : *n_w;
 }
 
+/* Non-zeros of a CasADi sparsity pattern [nrow, ncol, colind..., row...] ([nrow, ncol, 1]: dense). */
+static size_t nnz(const casadi_int *sp) {
+    return sp[2] == 1 && sp[1] > 0 ? (size_t)(sp[0] * sp[1]) : (size_t)sp[2 + sp[1]];
+}
+
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
-    work_fn sizes[] = {ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
+    work_fn sizes[] = {ddp_local_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
@@ -83,8 +95,9 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
     W->iw = calloc(n_iw + 1, sizeof(casadi_int));
     W->w = calloc(n_w + 1, sizeof(double));
     W->value_end = calloc(W->n_value, sizeof(double));
+    W->model = calloc(nnz(ddp_local_knot_sparsity_out(0)), sizeof(double));
     W->hess = calloc(n_hess + 1, sizeof(double));
-    if (!W->arg || !W->res || !W->iw || !W->w || !W->value_end || !W->hess) {
+    if (!W->arg || !W->res || !W->iw || !W->w || !W->value_end || !W->model || !W->hess) {
         ddp_work_free(W);
         return NULL;
     }
@@ -115,21 +128,30 @@ static int value_end(Work *W, int N, const double *X, const double *P, const dou
     return ddp_back_terminal(W->arg, W->res, W->iw, W->w, 0);
 }
 
+/* The local model of knot t into W->model. */
+static int local_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
+                      const double *rho) {
+    W->arg[0] = X + (size_t)t * W->nx, W->arg[1] = U + (size_t)t * W->nu, W->arg[2] = P + (size_t)t * W->np;
+    W->arg[3] = Lam + (size_t)t * W->ng, W->arg[4] = rho;
+    W->res[0] = W->model;
+    return ddp_local_knot(W->arg, W->res, W->iw, W->w, 0);
+}
+
 /* One Riccati step at knot t: values[t], policy[t] from values[t+1] and the gap c_t. */
 static int back_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
                      const double *c, const double *rho, const double *reg, double *policy, double *values) {
     const double *S = values + (size_t)(t + 1) * W->n_value, *x = X + (size_t)t * W->nx;
     const double *u = U + (size_t)t * W->nu, *p = P + (size_t)t * W->np;
     double *hess = W->hess;
-    for (int k = 0; k < ddp_n_hess; ++k) {
+    int rc = local_knot(W, t, X, U, P, Lam, rho);
+    for (int k = 0; k < ddp_n_hess && !rc; ++k) {
         W->arg[0] = S, W->arg[1] = c, W->arg[2] = x, W->arg[3] = u, W->arg[4] = p;
         W->res[0] = hess;
-        int rc = ddp_hess[k](W->arg, W->res, W->iw, W->w, 0);
-        if (rc) return rc;
+        rc = ddp_hess[k](W->arg, W->res, W->iw, W->w, 0);
         hess += ddp_hess_size[k];
     }
-    W->arg[0] = S, W->arg[1] = x, W->arg[2] = u, W->arg[3] = p;
-    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = c, W->arg[6] = rho, W->arg[7] = reg, W->arg[8] = W->hess;
+    if (rc) return rc;
+    W->arg[0] = S, W->arg[1] = W->model, W->arg[2] = u, W->arg[3] = c, W->arg[4] = reg, W->arg[5] = W->hess;
     W->res[0] = values + (size_t)t * W->n_value, W->res[1] = policy + (size_t)t * W->n_policy;
     return ddp_back_knot(W->arg, W->res, W->iw, W->w, 0);
 }
@@ -205,9 +227,10 @@ int ddp_gradient(Work *W, int N, const double *X, const double *U, const double 
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        W->arg[0] = costates + (size_t)(t + 1) * W->nx;
-        W->arg[1] = X + (size_t)t * W->nx, W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np;
-        W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = &rho, W->arg[6] = policy + (size_t)t * W->n_policy;
+        rc = local_knot(W, t, X, U, P, Lam, &rho);
+        if (rc) break;
+        W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = W->model;
+        W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = policy + (size_t)t * W->n_policy;
         W->res[0] = costates + (size_t)t * W->nx, W->res[1] = &knot_stat;
         rc = ddp_grad_knot(W->arg, W->res, W->iw, W->w, 0);
         *stat = knot_stat > *stat ? knot_stat : *stat;
