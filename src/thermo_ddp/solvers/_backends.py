@@ -93,18 +93,29 @@ def _function(name, inputs, outputs, names_in, names_out, cse=True):
 
 
 def _local_model_knot(problem, knots):
-    """The knot's local model [vec(A); vec(B); lx; lu; vec(lxx); vec(luu); vec(lux)] (one compiled function,
-    shared by the backward and first-order steps) and the same as a dict of parts of an input symbol."""
+    """The knot's local model: the structural, non-constant non-zeros of A, B, lx, lu, lxx, luu, lux stacked
+    (one compiled function, shared by the backward and first-order steps), and the same parts rebuilt from
+    an input symbol with their sparsity and constants (so the Riccati step keeps skipping the zeros and
+    folding the constant entries of A and B, e.g. RK4's identity)."""
     x, u, p, lam, _, rho = knots["syms"]
-    parts = [ca.densify(knots["model"][name]) for name in MODEL_PARTS]
-    local = _function("ddp_local_knot", [x, u, p, lam, rho], [ca.vertcat(*[ca.vec(m) for m in parts])],
+    parts = [knots["model"][name] for name in MODEL_PARTS]
+    entries = [[e for e in _nonzeros(m) if not e.is_constant()] for m in parts]
+    local = _function("ddp_local_knot", [x, u, p, lam, rho], [ca.vertcat(*[e for es in entries for e in es])],
                       ["x", "u", "p", "lam", "rho"], ["model"])
     packed = problem.functions.symbolic.sym("model", local.nnz_out(0))
     model_in, offset = {}, 0
     for name, m in zip(MODEL_PARTS, parts):
-        model_in[name] = ca.reshape(packed[offset: offset + m.numel()], m.shape)
-        offset += m.numel()
+        values = []
+        for e in _nonzeros(m):
+            values.append(e if e.is_constant() else packed[offset])
+            offset += not e.is_constant()
+        model_in[name] = type(packed)(m.sparsity(), ca.vertcat(*values)) if values else type(packed)(m.sparsity())
     return local, (packed, model_in)
+
+
+def _nonzeros(m):
+    """The structural non-zeros of a symbolic matrix as scalars (an MX matrix: itself, one entry)."""
+    return m.nonzeros() if isinstance(m, ca.SX) else [m.nz[i] for i in range(m.nnz())]
 
 
 def _backward_knot(problem, settings, layout, knots, model_in, compiled):
