@@ -91,7 +91,7 @@ def record(k: str | None, library: Path) -> ctypes.CDLL:
 
 
 def _load(k: str | None, library: Path) -> ctypes.CDLL:
-    lib = ctypes.CDLL(str(library))
+    lib = ctypes.CDLL(str(library.resolve()))  # a bare name would be searched on the system paths
     if k is not None:
         _LOADED[k] = lib
     return lib
