@@ -323,9 +323,6 @@ class CasadiBackend:
         return float(J[0, 0]), G, GN.ravel(), C
 
 
-_PASSES = ("ddp_backward", "ddp_evaluate_backward", "ddp_gradient", "ddp_forward", "ddp_evaluate")
-
-
 def compiled_library(problem, settings, layout):
     """The loaded library of the problem's compiled knot functions and driver, built if needed; None
     (with a warning) when no C can be built (no compiler; MX functions without C code, e.g. CVODES)."""
@@ -375,9 +372,10 @@ class CompiledBackend:
         weakref.finalize(self, library.ddp_work_free, self._work)
 
     def _call(self, name, N, args, outs):
-        """Run pass ``name`` on horizon N: args and outs as (value, row count, dimension) or floats."""
-        keep = []
-        ptrs = []
+        """Run pass ``name`` on horizon N. ``args``: (array, rows, dimension name) or a float each; ``outs``:
+        (rows, dimension name) each, rows 0 for a vector (then the dimension may be a size). Arrays are
+        checked against the sizes the C driver will read (kept alive in ``keep`` during the call)."""
+        keep, ptrs = [], []
         for value in args:
             if isinstance(value, tuple):
                 arr, rows, dim = value
@@ -438,10 +436,9 @@ def _bind(library: ctypes.CDLL) -> None:
     library.ddp_work_new.restype = ptr
     library.ddp_work_new.argtypes = [ctypes.c_int] * 5
     library.ddp_work_free.argtypes = [ptr]
-    scalars = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
-               "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}
-    for name in _PASSES:
-        arrays, doubles, outputs = scalars[name]
+    counts = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
+              "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}  # input arrays, doubles, output arrays
+    for name, (arrays, doubles, outputs) in counts.items():
         fn = getattr(library, name)
         fn.restype = ctypes.c_int
         fn.argtypes = [ptr, ctypes.c_int] + [ptr] * arrays + [dbl] * doubles + [ptr] * outputs
