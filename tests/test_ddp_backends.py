@@ -47,11 +47,11 @@ def case(request):
 
 
 def _close(got, want):
-    """Equal to rounding: 1e-10 relative to the array's scale (Cholesky in numpy, LDL' in the others)."""
+    """Equal to rounding: 1e-12 of the array's scale (measured: 5e-15; Cholesky in numpy, LDL' in the others)."""
     for g, w in zip(got, want):
         g, w = np.asarray(g, float), np.asarray(w, float)
         assert g.shape == w.shape
-        np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12 * (1.0 + np.max(np.abs(w), initial=0.0)))
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-12 * (1.0 + np.max(np.abs(w), initial=0.0)))
 
 
 def test_every_pass_equals_the_vm_and_numpy_backends(case):
