@@ -81,7 +81,7 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
 
 
 # The knots the C driver calls (and "hess"): the local model once per knot, then the Riccati or first-order step.
-COMPILED = ("local", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
+COMPILED = ("local", "local_eval", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
 MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
@@ -100,8 +100,13 @@ def _local_model_knot(problem, knots):
     x, u, p, lam, _, rho = knots["syms"]
     parts = [knots["model"][name] for name in MODEL_PARTS]
     entries = [[e for e in _nonzeros(m) if not e.is_constant()] for m in parts]
-    local = _function("ddp_local_knot", [x, u, p, lam, rho], [ca.vertcat(*[e for es in entries for e in es])],
-                      ["x", "u", "p", "lam", "rho"], ["model"])
+    packed_model = ca.vertcat(*[e for es in entries for e in es])
+    local = _function("ddp_local_knot", [x, u, p, lam, rho], [packed_model], ["x", "u", "p", "lam", "rho"], ["model"])
+    F, xn = problem.functions, problem.functions.symbolic.sym("x_next", problem.nx)
+    knots["local_eval"] = _function(  # the first pass: the evaluation shares the dynamics with the derivatives
+        "ddp_local_eval_knot", [x, u, p, lam, rho, xn],
+        [packed_model, 0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn],
+        ["x", "u", "p", "lam", "rho", "x_next"], ["model", "cost", "g", "gap"])
     packed = problem.functions.symbolic.sym("model", local.nnz_out(0))
     model_in, offset = {}, 0
     for name, m in zip(MODEL_PARTS, parts):

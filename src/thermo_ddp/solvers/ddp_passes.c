@@ -18,6 +18,7 @@ typedef int (*work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
     int name(const double **arg, double **res, casadi_int *iw, double *w, int mem);             \
     int name##_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 KNOT_FUNCTION(ddp_local_knot)
+KNOT_FUNCTION(ddp_local_eval_knot)
 KNOT_FUNCTION(ddp_back_knot)
 KNOT_FUNCTION(ddp_back_terminal)
 KNOT_FUNCTION(ddp_grad_knot)
@@ -28,7 +29,8 @@ const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 
 /* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
  * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and
- * ddp_grad_knot(a, model, u, policy).
+ * ddp_grad_knot(a, model, u, policy); ddp_local_eval_knot(x, u, p, lam, rho, x_next): the same and the
+ * knot's cost, g and gap (the first pass).
  * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
  * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
  * Gauss-Newton): the input hess of ddp_back_knot. */
@@ -77,7 +79,7 @@ static size_t nnz(const casadi_int *sp) {
 }
 
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
-    work_fn sizes[] = {ddp_local_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
+    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
@@ -128,22 +130,25 @@ static int value_end(Work *W, int N, const double *X, const double *P, const dou
     return ddp_back_terminal(W->arg, W->res, W->iw, W->w, 0);
 }
 
-/* The local model of knot t into W->model. */
+/* The local model of knot t into W->model; with cost (else NULL) also the knot's cost, g and gap. */
 static int local_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
-                      const double *rho) {
+                      const double *rho, double *cost, double *G, double *C) {
     W->arg[0] = X + (size_t)t * W->nx, W->arg[1] = U + (size_t)t * W->nu, W->arg[2] = P + (size_t)t * W->np;
-    W->arg[3] = Lam + (size_t)t * W->ng, W->arg[4] = rho;
+    W->arg[3] = Lam + (size_t)t * W->ng, W->arg[4] = rho, W->arg[5] = X + (size_t)(t + 1) * W->nx;
     W->res[0] = W->model;
-    return ddp_local_knot(W->arg, W->res, W->iw, W->w, 0);
+    if (!cost) return ddp_local_knot(W->arg, W->res, W->iw, W->w, 0);
+    W->res[1] = cost, W->res[2] = G + (size_t)t * W->ng, W->res[3] = C + (size_t)t * W->nx;
+    return ddp_local_eval_knot(W->arg, W->res, W->iw, W->w, 0);
 }
 
-/* One Riccati step at knot t: values[t], policy[t] from values[t+1] and the gap c_t. */
-static int back_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
-                     const double *c, const double *rho, const double *reg, double *policy, double *values) {
+/* One Riccati step at knot t from the local model in W->model: values[t], policy[t] from values[t+1]
+ * and the gap c_t. */
+static int back_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *c,
+                     const double *reg, double *policy, double *values) {
     const double *S = values + (size_t)(t + 1) * W->n_value, *x = X + (size_t)t * W->nx;
     const double *u = U + (size_t)t * W->nu, *p = P + (size_t)t * W->np;
     double *hess = W->hess;
-    int rc = local_knot(W, t, X, U, P, Lam, rho);
+    int rc = 0;
     for (int k = 0; k < ddp_n_hess && !rc; ++k) {
         W->arg[0] = S, W->arg[1] = c, W->arg[2] = x, W->arg[3] = u, W->arg[4] = p;
         W->res[0] = hess;
@@ -188,14 +193,16 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
     double J = 0.0, cost = 0.0;
     if (C_out && !rc) rc = eval_end(W, N, X, P, &J, GN);
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        if (C_out) {
+        if (failed) { /* only the evaluation goes on */
             rc = eval_knot(W, t, X, U, P, &cost, G, C_out);
             J += cost;
+            continue;
         }
-        if (failed || rc) continue;
-        const double *c = (C_out ? C_out : C) + (size_t)t * W->nx;
-        rc = back_knot(W, t, X, U, P, Lam, c, &rho, &reg, policy, values);
-        if (!(policy[(size_t)t * W->n_policy + pivot] > 0.0)) {
+        rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
+                   : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+        J += cost;
+        if (!rc) rc = back_knot(W, t, X, U, P, (C_out ? C_out : C) + (size_t)t * W->nx, &reg, policy, values);
+        if (!rc && !(policy[(size_t)t * W->n_policy + pivot] > 0.0)) {
             mark_failed(W, t, policy, values);
             failed = 1;
             if (!C_out) break;
@@ -227,7 +234,7 @@ int ddp_gradient(Work *W, int N, const double *X, const double *U, const double 
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        rc = local_knot(W, t, X, U, P, Lam, &rho);
+        rc = local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
         if (rc) break;
         W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = W->model;
         W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = policy + (size_t)t * W->n_policy;
