@@ -6,16 +6,19 @@ per joint: winding_limit (84 °C), bus_voltage, joint_range, joint_velocity, cur
 hold_band. RK4 at dt = 0.016 s (stable for 7 joints: |lambda|max ~ 110 /s), N = 100. Joint sets by name:
 1: elbow; 2: shoulder (arm_left_2) + elbow; 4: arm_left_1..4; 7: the whole left arm.
 
-For each set and DDP mode (Gauss-Newton iLQR; full second-order DDP unless --skip-full-for), the codegen
-backend: build (C generation + gcc, cached on disk by hash), then ``--repeats`` cold solves from the
-same initial guess; per-iteration time = solve time / iterations, medians over the repeats.
-The 7-joint C takes minutes to compile the first time on a shared 2-core machine (cached after).
+For each set and DDP mode (Gauss-Newton iLQR and full second-order DDP), the codegen backend: build
+(symbolic knot functions, C generation, gcc: one file per knot function, compiled in parallel; run the
+benchmark with an empty cache, THERMO_DDP_CACHE=$(mktemp -d), for build times from scratch), then
+``--repeats`` cold solves from the same initial guess; per-iteration time = solve time / iterations,
+medians over the repeats. ``--baseline FILE``: an earlier run's JSON (e.g. the whole-horizon mapaccum
+code of commit 41709c8) whose build and per-iteration figures are copied beside each case, with ratios.
 
-Usage: python benchmarks/bench_joint_scaling.py [--repeats 5] [--skip-full-for 7]
+Usage: python benchmarks/bench_joint_scaling.py [--repeats 5] [--joints 1 2 4 7] [--baseline old.json]
 """
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 
@@ -51,17 +54,29 @@ def bench_case(joints, full: bool, repeats: int) -> dict:
             "per_backward_pass_median_s": statistics.median(per_pass), "repeats": repeats}
 
 
+def _baseline(path) -> dict:
+    """(joint count, mode) -> the earlier run's case."""
+    if path is None:
+        return {}
+    return {(len(c["joints"]), c["mode"]): c for c in json.loads(open(path).read())["cases"]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--skip-full-for", type=int, nargs="*", default=[7], help="joint counts without full DDP")
+    ap.add_argument("--joints", type=int, nargs="*", default=list(JOINT_SETS), choices=list(JOINT_SETS))
+    ap.add_argument("--baseline", help="an earlier run's JSON: its figures are copied beside each case")
+    ap.add_argument("--baseline-label", default="whole-horizon mapaccum C (commit 41709c8)")
     args = ap.parse_args()
+    baseline = _baseline(args.baseline)
     rows = []
-    for n, joints in JOINT_SETS.items():
+    for n in args.joints:
         for full in (False, True):
-            if full and n in args.skip_full_for:
-                continue
-            row = bench_case(joints, full, args.repeats)
+            row = bench_case(JOINT_SETS[n], full, args.repeats)
+            old = baseline.get((n, row["mode"]))
+            if old is not None:
+                row["baseline"] = {k: old[k] for k in ("build_s", "per_iteration_median_s", "iterations", "status")}
+                row["per_iteration_ratio_to_baseline"] = row["per_iteration_median_s"] / old["per_iteration_median_s"]
             rows.append(row)
             print(f"{n} joints {row['mode']:>12}: {row['status']:>22} {row['iterations']:4d} it, "
                   f"{1e3 * row['per_iteration_median_s']:8.2f} ms/it, {row['solve_median_s']:7.3f} s, "
@@ -71,7 +86,7 @@ def main() -> None:
         ratio = r["per_iteration_median_s"] / base[r["mode"]] if r["mode"] in base else None
         r["per_iteration_ratio_to_1_joint"] = ratio
     write("joint_scaling", {"problem": __doc__.split("\n\n")[1], "dt_s": DT_S, "move_s": MOVE_S, "hold_s": HOLD_S,
-                            "cases": rows})
+                            "baseline": args.baseline_label if baseline else None, "cases": rows})
 
 
 if __name__ == "__main__":

@@ -161,16 +161,38 @@ def test_fused_first_pass_and_first_order_pass_agree_with_the_full_passes(boxed,
 
 def test_compiled_passes_are_found_again_without_rebuilding(monkeypatch):
     """A second solver for the same problem loads the library through the pass index (no symbolic
-    build); another weight gives another key."""
+    build); another control bound gives another key."""
     from thermo_ddp.solvers import _backends, _pass_cache
     first = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
+    assert first.info["backend"] == "codegen"
     assert _pass_cache.load(_pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())) is not None
-    monkeypatch.setattr(_backends, "build_passes", lambda *a: pytest.fail("passes rebuilt"))
+    monkeypatch.setattr(_backends, "knot_functions", lambda *a: pytest.fail("knot functions rebuilt"))
     again = DDPSolver(lq_problem(u_bound=[0.6, 0.4])).solve(X0)
     assert again.iterations == first.iterations
     np.testing.assert_array_equal(again.us, first.us)
     assert _pass_cache.key(lq_problem(u_bound=[0.6, 0.5]), DDPSettings()) != \
         _pass_cache.key(lq_problem(u_bound=[0.6, 0.4]), DDPSettings())
+
+
+def test_a_new_horizon_calls_no_compiler(monkeypatch):
+    """The compiled code depends on the structure only: after one build, problems of other horizons load
+    the same library (no compiler, no symbolic build) and solve to the Riccati optimum of their horizon."""
+    import subprocess
+
+    from thermo_ddp import codegen
+    from thermo_ddp.solvers import _backends, _pass_cache
+    assert DDPSolver(lq_problem()).backend.name == "codegen"
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: pytest.fail("compiler called"))
+    monkeypatch.setattr(codegen, "_build", lambda *a, **k: pytest.fail("library built"))
+    monkeypatch.setattr(_backends, "knot_functions", lambda *a, **k: pytest.fail("knot functions rebuilt"))
+    for horizon in (7, 2 * N + 3):
+        assert _pass_cache.key(lq_problem(horizon=horizon), DDPSettings()) == _pass_cache.key(lq_problem(),
+                                                                                              DDPSettings())
+        res = DDPSolver(lq_problem(horizon=horizon)).solve(X0)
+        xs, us, gains = riccati(horizon)
+        assert res.success and res.info["backend"] == "codegen" and res.iterations == 1
+        np.testing.assert_allclose(res.us, us, atol=1e-8)
+        np.testing.assert_allclose(res.K, gains, atol=1e-8)
 
 
 def test_failed_backward_pass_raises_the_regularisation_past_the_first_failed_pivot():

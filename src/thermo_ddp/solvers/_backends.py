@@ -1,7 +1,7 @@
-"""Batched evaluation of the DDP passes: CasADi mapaccum, compiled C, or numpy loops.
+"""The DDP passes on whole trajectories: compiled C loops over a runtime horizon, CasADi mapaccum, or numpy.
 
-Every backend offers the same four calls on whole trajectories, as C-contiguous numpy arrays
-with one row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps):
+Every backend offers the same calls on whole trajectories, as C-contiguous numpy arrays with one
+row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps):
   backward(X, U, P, Lam, LamN, C, rho, reg) -> (policy (N, n_policy), summary [d1, d2, stat, pivot],
                                                 values (N+1, n_value))
   evaluate_backward(X, U, P, Lam, LamN, rho, reg) -> ((J, G, GN, C), backward's outputs): both in
@@ -10,19 +10,26 @@ with one row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, n
                                                 the gains of ``policy`` (a gap-free iterate)
   forward(X, U, P, policy, C, alpha)        -> (Xn, Un, J, G, GN)
   evaluate(X, U, P)                          -> (J, G, GN, C)
-A row-per-knot C array is exactly CasADi's column-major (dim, knots) matrix, so the "casadi"
-and "codegen" backends pass the arrays' memory to CasADi without copies (Function.buffer)
-and make one call per pass (no Python loop over knots).
+All are built from the same six per-knot CasADi functions (``knot_functions``). "codegen" compiles
+only those (one C file each) and loops them over the horizon in a hand-written C driver
+(solvers/ddp_passes.c, called through ctypes on the arrays' memory): the library depends on the
+problem's structure, not on N, so a new horizon compiles nothing. "casadi" maps them over the horizon
+in the CasADi VM (mapaccum: one call per pass). "numpy" runs the Riccati recursion and the rollout as
+numpy loops. A backward pass stops at the first (latest) knot with a non-positive pivot in "codegen"
+and "numpy" (earlier knots get pivot -1); "casadi" runs on. A row-per-knot C array is exactly
+CasADi's column-major (dim, knots) matrix, so no backend copies the trajectories.
 """
 from __future__ import annotations
 
+import ctypes
 import logging
 import subprocess
+import weakref
 
 import casadi as ca
 import numpy as np
 
-from ..codegen import compile_functions
+from .. import codegen
 from . import _pass_cache
 from ._riccati import NumpyOps, SymOps, backward_step, gradient_step, knot_model
 
@@ -53,8 +60,9 @@ class Layout:
         return values[:, : self.nx] + values[:, self.nx: 2 * self.nx]
 
 
-def _symbolic_step(problem, settings, layout):
-    """CasADi functions for one knot: backward, terminal, forward, evaluation."""
+def knot_functions(problem, settings, layout, compiled: bool = False):
+    """The per-knot CasADi functions (C names ``ddp_*``, all outputs dense) and the symbolic local model;
+    ``compiled``: without the composed backward step (the driver composes it; saves seconds for big models)."""
     F = problem.functions
     sym = F.symbolic
     x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
@@ -63,63 +71,130 @@ def _symbolic_step(problem, settings, layout):
     model = knot_model(F, x, u, p, lam, rho, settings.full_second_order)
     second = model.pop("second_order_sym", None)
     knots = {"model": model, "second": second, "syms": (x, u, p, lam, lamN, rho)}
-    knots["back"], knots["terminal"] = _backward_knot(problem, settings, layout, knots)
-    knots["grad"] = _gradient_knot(problem, layout, knots)
+    knots["local"], model_in = _local_model_knot(problem, knots)
+    knots["back_core"], knots["back"], knots["terminal"] = _backward_knot(problem, settings, layout, knots, model_in,
+                                                                          compiled)
+    knots["grad_core"], knots["grad"] = _gradient_knot(problem, layout, knots, model_in, compiled)
     knots["fwd"] = _forward_knot(problem, layout, x, p)
     knots["eval"], knots["end"] = _evaluation_knots(problem, x, u, p)
-    knots["back_eval"] = _back_eval_knot(problem, layout, knots)
     return knots
 
 
-def _backward_knot(problem, settings, layout, knots):
-    """One Riccati step (with the knot's derivatives) and the terminal value function."""
-    F, nx = problem.functions, problem.nx
+# The knots the C driver calls (and "hess"): the local model once per knot, then the Riccati or first-order step.
+COMPILED = ("local", "local_eval", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
+MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
+# Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
+HESSIAN_CHUNK_NODES = 1_000_000
+
+
+def _function(name, inputs, outputs, names_in, names_out, cse=True):
+    """A knot function with dense outputs (the driver writes whole rows), shared subexpressions by default."""
+    return ca.Function(name, inputs, [ca.densify(o) for o in outputs], names_in, names_out, _CSE if cse else {})
+
+
+def _local_model_knot(problem, knots):
+    """The knot's local model: the structural, non-constant non-zeros of A, B, lx, lu, lxx, luu, lux stacked
+    (one compiled function, shared by the backward and first-order steps), and the same parts rebuilt from
+    an input symbol with their sparsity and constants (so the Riccati step keeps skipping the zeros and
+    folding the constant entries of A and B, e.g. RK4's identity)."""
+    x, u, p, lam, _, rho = knots["syms"]
+    parts = [knots["model"][name] for name in MODEL_PARTS]
+    entries = [[e for e in _nonzeros(m) if not e.is_constant()] for m in parts]
+    packed_model = ca.vertcat(*[e for es in entries for e in es])
+    local = _function("ddp_local_knot", [x, u, p, lam, rho], [packed_model], ["x", "u", "p", "lam", "rho"], ["model"])
+    F, xn = problem.functions, problem.functions.symbolic.sym("x_next", problem.nx)
+    knots["local_eval"] = _function(  # the first pass: the evaluation shares the dynamics with the derivatives
+        "ddp_local_eval_knot", [x, u, p, lam, rho, xn],
+        [packed_model, 0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn],
+        ["x", "u", "p", "lam", "rho", "x_next"], ["model", "cost", "g", "gap"])
+    packed = problem.functions.symbolic.sym("model", local.nnz_out(0))
+    model_in, offset = {}, 0
+    for name, m in zip(MODEL_PARTS, parts):
+        values = []
+        for e in _nonzeros(m):
+            values.append(e if e.is_constant() else packed[offset])
+            offset += not e.is_constant()
+        model_in[name] = type(packed)(m.sparsity(), ca.vertcat(*values)) if values else type(packed)(m.sparsity())
+    return local, (packed, model_in)
+
+
+def _nonzeros(m):
+    """The structural non-zeros of a symbolic matrix as scalars (an MX matrix: itself, one entry)."""
+    return m.nonzeros() if isinstance(m, ca.SX) else [m.nz[i] for i in range(m.nnz())]
+
+
+def _backward_knot(problem, settings, layout, knots, model_in, compiled):
+    """One Riccati step from the packed local model (compiled core; composed with the local model for the
+    VM unless ``compiled``) and the terminal value function. Full DDP: the core takes the dynamics'
+    second-order term H = d2(v'f)/dz2 (z = [x; u], v = a + b + Vxx c) as an input ``hess`` (empty in
+    Gauss-Newton), computed by the ``hess`` chunk functions (see _hessian_chunks)."""
+    F, nx, nz = problem.functions, problem.nx, problem.nx + problem.nu
     x, u, p, lam, lamN, rho = knots["syms"]
     reg, c, S = F.symbolic.sym("reg"), F.symbolic.sym("c", nx), F.symbolic.sym("S", layout.n_value)
-    model = dict(knots["model"])
-    if knots["second"] is not None:
-        v_sym, hxx, huu, hux = knots["second"]
-        model["second_order"] = lambda v: tuple(ca.substitute(h, v_sym, v) for h in (hxx, huu, hux))
+    packed, model = model_in[0], dict(model_in[1])
+    chunks = _hessian_chunks(problem, layout, x, u, p) if settings.full_second_order else []
+    hess = F.symbolic.sym("hess", sum(f.nnz_out(0) for f, _ in chunks))
+    if chunks:
+        columns = np.concatenate([cols for _, cols in chunks])
+        H = ca.reshape(hess, nz, nz)[:, np.argsort(columns).tolist()]  # chunk order -> column order
+        model["second_order"] = lambda v: (H[:nx, :nx], H[nx:, nx:], H[nx:, :nx])
     a, b, Vxx = S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx)
     st = backward_step(SymOps, model, a, b, Vxx, c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
                        settings.box_iterations, problem.has_box)
     S_prev = ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"]))
     policy = ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])
-    back = ca.Function("ddp_back_knot", [S, x, u, p, lam, c, rho, reg], [S_prev, policy],
-                       ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
+    back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
+                     ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
+    knots["hess"] = [f for f, _ in chunks]
+    composed = None if compiled else ca.Function(
+        "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
+        back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
+        ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
-    S_N = ca.vertcat(term["lx"], ca.DM.zeros(nx), ca.vec(ca.densify(term["lxx"])))
-    terminal = ca.Function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"], _CSE)
-    return back, terminal
+    S_N = ca.vertcat(term["lx"], ca.DM.zeros(nx), ca.vec(term["lxx"]))
+    terminal = _function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"])
+    return back, composed, terminal
 
 
-def _back_eval_knot(problem, layout, knots):
-    """The backward knot with the gap c = f(x, u, p) - x_next computed inside; also the knot's cost and g
-    (CSE shares the dynamics and residuals between the two)."""
-    sym = problem.functions.symbolic
-    x, u, p, lam, _, rho = knots["syms"]
-    S, xn, reg = sym.sym("S", layout.n_value), sym.sym("x_next", problem.nx), sym.sym("reg")
-    cost, g, gap = knots["eval"](x, u, p, xn)
-    S_prev, policy = knots["back"](S, x, u, p, lam, gap, rho, reg)
-    return ca.Function("ddp_back_eval_knot", [S, x, u, p, lam, xn, rho, reg], [S_prev, policy, cost, g, gap],
-                       ["S", "x", "u", "p", "lam", "x_next", "rho", "reg"], ["S_prev", "policy", "cost", "g", "gap"],
-                       _CSE)
+def _hessian_chunks(problem, layout, x, u, p):
+    """The full-DDP term d2(v'f)/dz2 with v = a + b + Vxx c from (S, c), as functions of column groups
+    (round robin, so the costly angle columns spread evenly): for a large model each is its own C file,
+    compiled in parallel. Returns [(function, its columns)]. No CSE: it saves 1 % of their instructions
+    for the 7-joint arm (1.10e6 -> 1.12e6 without) and costs 11 s."""
+    F, nx = problem.functions, problem.nx
+    S, c = F.symbolic.sym("S", layout.n_value), F.symbolic.sym("c", nx)
+    v = S[:nx] + (S[nx: 2 * nx] + ca.reshape(S[2 * nx:], nx, nx) @ c)  # as backward_step: a + (b + Vxx c)
+    z = ca.vertcat(x, u)
+    grad = ca.gradient(ca.dot(v, F.step(x, u, p)), z)
+    n_chunks = max(1, min(z.numel(), round(z.numel() * ca.n_nodes(grad) / HESSIAN_CHUNK_NODES)))
+    chunks = []
+    for k in range(n_chunks):
+        cols = np.arange(k, z.numel(), n_chunks)
+        H = ca.jacobian(grad, z[cols.tolist()])
+        chunks.append((_function(f"ddp_hess_{k}", [S, c, x, u, p], [ca.vec(H)], ["S", "c", "x", "u", "p"], ["hess"],
+                                 cse=False), cols))
+    return chunks
 
 
-def _gradient_knot(problem, layout, knots):
-    """First-order backward step with given gains (see _riccati.gradient_step)."""
+def _gradient_knot(problem, layout, knots, model_in, compiled):
+    """First-order backward step with given gains (see _riccati.gradient_step) from the packed local
+    model (compiled core) and composed with the local model (VM)."""
     nx, nu = problem.nx, problem.nu
     x, u, p, lam, _, rho = knots["syms"]
     a, pol = problem.functions.symbolic.sym("a", nx), problem.functions.symbolic.sym("policy", layout.n_policy)
     K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
-    a_prev, stat = gradient_step(SymOps, knots["model"], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
+    a_prev, stat = gradient_step(SymOps, model_in[1], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
                                  problem.has_box)
-    return ca.Function("ddp_grad_knot", [a, x, u, p, lam, rho, pol], [a_prev, stat],
-                       ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"], _CSE)
+    core = _function("ddp_grad_knot", [a, model_in[0], u, pol], [a_prev, stat], ["a", "model", "u", "policy"],
+                     ["a_prev", "stat"])
+    composed = None if compiled else ca.Function("ddp_grad_composed", [a, x, u, p, lam, rho, pol],
+                           core(a, knots["local"](x, u, p, lam, rho), u, pol),
+                           ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"], _CSE)
+    return core, composed
 
 
 def _forward_knot(problem, layout, x, p):
-    """Nonlinear rollout step: u = clip(u_ref + alpha k + K dx), x' = f(x, u) - (1 - alpha) c."""
+    """Nonlinear rollout step: u = clip(u_ref + alpha k + K dx), x' = f(x, u) - (1 - alpha) c; its cost and g."""
     F, nx, nu = problem.functions, problem.nx, problem.nu
     sym = F.symbolic
     xr, ur, alpha, c = sym.sym("x_ref", nx), sym.sym("u_ref", nu), sym.sym("alpha"), sym.sym("c", nx)
@@ -129,20 +204,20 @@ def _forward_knot(problem, layout, x, p):
     if problem.has_box:
         u_new = ca.fmin(ca.fmax(u_new, ca.DM(problem.u_lb)), ca.DM(problem.u_ub))
     x_next = F.step(x, u_new, p) - (1 - alpha) * c
-    stage = ca.vertcat(u_new, 0.5 * ca.sumsqr(F.stage_residual(x, u_new, p)), F.stage_constraint(x, u_new, p))
-    return ca.Function("ddp_fwd_knot", [x, xr, ur, pol, c, p, alpha], [x_next, stage],
-                       ["x", "x_ref", "u_ref", "policy", "c", "p", "alpha"], ["x_next", "stage"], _CSE)
+    cost, g = 0.5 * ca.sumsqr(F.stage_residual(x, u_new, p)), F.stage_constraint(x, u_new, p)
+    return _function("ddp_fwd_knot", [x, xr, ur, pol, c, p, alpha], [x_next, u_new, cost, g],
+                     ["x", "x_ref", "u_ref", "policy", "c", "p", "alpha"], ["x_next", "u", "cost", "g"])
 
 
 def _evaluation_knots(problem, x, u, p):
     """Cost, constraints and gap of one knot; cost and constraints of the terminal knot."""
     F = problem.functions
     xn = F.symbolic.sym("x_next", problem.nx)
-    ev = ca.Function("ddp_eval_knot", [x, u, p, xn],
-                     [0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn],
-                     ["x", "u", "p", "x_next"], ["cost", "g", "gap"], _CSE)
-    end = ca.Function("ddp_terminal", [x, p], [0.5 * ca.sumsqr(F.terminal_residual(x, p)), F.terminal_constraint(x, p)],
-                      ["x", "p"], ["cost", "g"], _CSE)
+    ev = _function("ddp_eval_knot", [x, u, p, xn],
+                   [0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn],
+                   ["x", "u", "p", "x_next"], ["cost", "g", "gap"])
+    end = _function("ddp_terminal", [x, p], [0.5 * ca.sumsqr(F.terminal_residual(x, p)), F.terminal_constraint(x, p)],
+                    ["x", "p"], ["cost", "g"])
     return ev, end
 
 
@@ -150,50 +225,46 @@ def _reverse(M, N):
     return M[:, list(range(N - 1, -1, -1))]
 
 
-def build_passes(problem, settings, layout):
-    """MX functions for the whole horizon: one call per pass (mapaccum over knots)."""
-    knots = _symbolic_step(problem, settings, layout)
-    nx, nu, n_p, N = problem.nx, problem.nu, problem.n_params, problem.horizon
+def build_passes(problem, knots, layout):
+    """MX functions for the whole horizon (CasADi VM): one call per pass, mapaccum over the knots."""
+    nx, n_p, N = problem.nx, problem.n_params, problem.horizon
     ng, ngN = problem.n_constraints, problem.n_terminal_constraints
-    X, U, P = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", nu, N), ca.MX.sym("P", n_p, N + 1)
+    X, U, P = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", problem.nu, N), ca.MX.sym("P", n_p, N + 1)
     Lam, LamN, C = ca.MX.sym("Lam", ng, N), ca.MX.sym("LamN", ngN), ca.MX.sym("C", nx, N)
     rho, reg, alpha = ca.MX.sym("rho"), ca.MX.sym("reg"), ca.MX.sym("alpha")
     Pol = ca.MX.sym("policy", layout.n_policy, N)
 
-    S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)
-    knot_args = (_reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N))
-    S_rev, pol_rev = knots["back"].mapaccum("ddp_back_acc", N)(S_N, *knot_args, _reverse(C, N), rho, reg)
-    backward = ca.Function("ddp_backward", [X, U, P, Lam, LamN, C, rho, reg],
-                           _backward_outputs(layout, S_rev, pol_rev, S_N),
-                           ["X", "U", "P", "Lam", "LamN", "C", "rho", "reg"], ["policy", "summary", "values"])
-    S_rev, pol_rev, cost_rev, g_rev, gap_rev = knots["back_eval"].mapaccum("ddp_back_eval_acc", N)(
-        S_N, *knot_args, _reverse(X[:, 1:], N), rho, reg)
-    costN, gN = knots["end"](X[:, N], P[:, N])
-    evaluate_backward = ca.Function(
-        "ddp_evaluate_backward", [X, U, P, Lam, LamN, rho, reg],
-        [*_backward_outputs(layout, S_rev, pol_rev, S_N), ca.sum2(_reverse(cost_rev, N)) + costN,
-         _reverse(g_rev, N), gN, _reverse(gap_rev, N)],
-        ["X", "U", "P", "Lam", "LamN", "rho", "reg"], ["policy", "summary", "values", "J", "G", "GN", "C"])
-
-    a_rev, stat = knots["grad"].mapaccum("ddp_grad_acc", N)(S_N[:nx], *knot_args, rho, _reverse(Pol, N))
-    gradient = ca.Function("ddp_gradient", [X, U, P, Lam, LamN, Pol, rho],
-                           [ca.mmax(stat), ca.horzcat(_reverse(a_rev, N), S_N[:nx])],
-                           ["X", "U", "P", "Lam", "LamN", "policy", "rho"], ["stat", "costates"])
-
-    fwd = knots["fwd"].mapaccum("ddp_fwd_acc", N)
-    X_new, stage = fwd(X[:, 0], X[:, :N], U, Pol, C, P[:, :N], alpha)
-    Xn = ca.horzcat(X[:, 0], X_new)
-    costN, gN = knots["end"](Xn[:, N], P[:, N])
-    forward = ca.Function("ddp_forward", [X, U, P, Pol, C, alpha],
-                          [Xn, stage[:nu, :], ca.sum2(stage[nu, :]) + costN, stage[nu + 1:, :], gN],
-                          ["X", "U", "P", "policy", "C", "alpha"], ["X_new", "U_new", "J", "G", "GN"])
+    def sweep(gaps):
+        S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)
+        S_rev, pol_rev = knots["back"].mapaccum("ddp_back_acc", N)(
+            S_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), _reverse(gaps, N),
+            rho, reg)
+        return _backward_outputs(layout, S_rev, pol_rev, S_N)
 
     cost, G, gaps = knots["eval"].map(N)(X[:, :N], U, P[:, :N], X[:, 1:])
     costN, gN = knots["end"](X[:, N], P[:, N])
-    evaluate = ca.Function("ddp_evaluate", [X, U, P], [ca.sum2(cost) + costN, G, gN, gaps],
-                           ["X", "U", "P"], ["J", "G", "GN", "C"])
+    evaluation = [ca.sum2(cost) + costN, G, gN, gaps]
+    backward = ca.Function("ddp_backward", [X, U, P, Lam, LamN, C, rho, reg], sweep(C),
+                           ["X", "U", "P", "Lam", "LamN", "C", "rho", "reg"], ["policy", "summary", "values"])
+    evaluate_backward = ca.Function(
+        "ddp_evaluate_backward", [X, U, P, Lam, LamN, rho, reg], [*sweep(gaps), *evaluation],
+        ["X", "U", "P", "Lam", "LamN", "rho", "reg"], ["policy", "summary", "values", "J", "G", "GN", "C"])
+    evaluate = ca.Function("ddp_evaluate", [X, U, P], evaluation, ["X", "U", "P"], ["J", "G", "GN", "C"])
+
+    a_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)[:nx]
+    a_rev, stat = knots["grad"].mapaccum("ddp_grad_acc", N)(
+        a_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), rho, _reverse(Pol, N))
+    gradient = ca.Function("ddp_gradient", [X, U, P, Lam, LamN, Pol, rho],
+                           [ca.mmax(stat), ca.horzcat(_reverse(a_rev, N), a_N)],
+                           ["X", "U", "P", "Lam", "LamN", "policy", "rho"], ["stat", "costates"])
+
+    X_new, U_new, cost, G = knots["fwd"].mapaccum("ddp_fwd_acc", N)(X[:, 0], X[:, :N], U, Pol, C, P[:, :N], alpha)
+    Xn = ca.horzcat(X[:, 0], X_new)
+    costN, gN = knots["end"](Xn[:, N], P[:, N])
+    forward = ca.Function("ddp_forward", [X, U, P, Pol, C, alpha], [Xn, U_new, ca.sum2(cost) + costN, G, gN],
+                          ["X", "U", "P", "policy", "C", "alpha"], ["X_new", "U_new", "J", "G", "GN"])
     return {"backward": backward, "evaluate_backward": evaluate_backward, "gradient": gradient, "forward": forward,
-            "evaluate": evaluate}, knots
+            "evaluate": evaluate}
 
 
 def _backward_outputs(layout, S_rev, pol_rev, S_N):
@@ -228,28 +299,13 @@ class _BufferCall:
 
 
 class CasadiBackend:
-    """Whole-horizon passes as CasADi functions (VM), optionally compiled to C."""
+    """Whole-horizon passes as CasADi functions in the VM (mapaccum over the knots)."""
 
-    def __init__(self, problem, settings, layout, compiled: bool):
-        key = _pass_cache.key(problem, settings) if compiled else None
-        funs = _pass_cache.load(key)
-        if funs is None:
-            funs = build_passes(problem, settings, layout)[0]
-            if compiled:
-                funs, compiled = self._compile(funs, settings, key)
-        self.name = "codegen" if compiled else "casadi"
-        self._f = {name: _BufferCall(f) for name, f in funs.items()}
+    name = "casadi"
 
-    @staticmethod
-    def _compile(passes, settings, key):
-        flags = tuple(settings.compiler_flags)
-        try:
-            funs = compile_functions(passes, flags)
-        except (RuntimeError, subprocess.CalledProcessError) as err:  # e.g. CVODES has no C code
-            log.warning("no compiled code for this problem (%s); using the CasADi VM backend", err)
-            return passes, False
-        _pass_cache.record(key, passes, flags)
-        return funs, True
+    def __init__(self, problem, settings, layout, knots=None):
+        knots = knots or knot_functions(problem, settings, layout)
+        self._f = {name: _BufferCall(f) for name, f in build_passes(problem, knots, layout).items()}
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
         policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, rho, reg)
@@ -272,15 +328,137 @@ class CasadiBackend:
         return float(J[0, 0]), G, GN.ravel(), C
 
 
+def compiled_library(problem, settings, layout):
+    """The loaded library of the problem's compiled knot functions and driver, built if needed; None
+    (with a warning) when no C can be built (no compiler; MX functions without C code, e.g. CVODES)."""
+    key = _pass_cache.key(problem, settings)
+    library = _pass_cache.load(key)
+    if library is not None:
+        return library
+    knots = knot_functions(problem, settings, layout, compiled=True)
+    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"]}
+    sources = {_pass_cache.DRIVER: _pass_cache.driver_source(), "ddp_hess_table.c": _hessian_table(knots["hess"])}
+    try:
+        path = codegen.compile_library(functions, settings.compiler_flags, sources)
+    except (RuntimeError, subprocess.CalledProcessError) as err:
+        log.warning("no compiled code for this problem (%s); using the CasADi VM backend", err)
+        return None
+    return _pass_cache.record(key, path)
+
+
+def _hessian_table(chunks) -> str:
+    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton)."""
+    sig = "(const double **, double **, long long *, double *, int)"
+    wsig = "(long long *, long long *, long long *, long long *)"
+    names = [f.name() for f in chunks]
+    lines = [f"int {n}{sig};\nint {n}_work{wsig};" for n in names]
+    listed = lambda items: "{" + (", ".join(items) or "0") + "}"  # noqa: E731
+    return "\n".join(lines + [
+        f"const int ddp_n_hess = {len(names)};",
+        f"int (*const ddp_hess[]){sig} = {listed(names)};",
+        f"int (*const ddp_hess_work[]){wsig} = {listed(n + '_work' for n in names)};",
+        f"const int ddp_hess_size[] = {listed(str(f.nnz_out(0)) for f in chunks)};", ""])
+
+
+class CompiledBackend:
+    """The passes as the C driver's loops over compiled knot functions (solvers/ddp_passes.c), any horizon."""
+
+    name = "codegen"
+
+    def __init__(self, problem, library: ctypes.CDLL):
+        self._lib = library
+        _bind(library)
+        nx, nu = problem.nx, problem.nu
+        self._dims = {"x": nx, "u": nu, "p": problem.n_params, "g": problem.n_constraints,
+                      "gN": problem.n_terminal_constraints, "policy": nu + nu * nx + 4, "value": 2 * nx + nx * nx}
+        self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"])
+        if not self._work:
+            raise MemoryError("no memory for the DDP work arrays")
+        weakref.finalize(self, library.ddp_work_free, self._work)
+
+    def _call(self, name, N, args, outs):
+        """Run pass ``name`` on horizon N. ``args``: (array, rows, dimension name) or a float each; ``outs``:
+        (rows, dimension name) each, rows 0 for a vector (then the dimension may be a size). Arrays are
+        checked against the sizes the C driver will read (kept alive in ``keep`` during the call)."""
+        keep, ptrs = [], []
+        for value in args:
+            if isinstance(value, tuple):
+                arr, rows, dim = value
+                arr = np.ascontiguousarray(arr, dtype=float)
+                if arr.size != rows * self._dims[dim]:
+                    raise ValueError(f"{name}: an argument of shape {arr.shape}, expected {rows} x {self._dims[dim]}")
+                keep.append(arr)
+                ptrs.append(arr.ctypes.data)
+            else:
+                ptrs.append(float(value))
+        results = [np.empty((rows, self._dims[dim]) if rows else self._dims.get(dim, dim)) for rows, dim in outs]
+        status = getattr(self._lib, name)(self._work, N, *ptrs, *(r.ctypes.data for r in results))
+        if status:
+            raise RuntimeError(f"{name}: a compiled knot function returned {status}")
+        return results
+
+    def backward(self, X, U, P, Lam, LamN, C, rho, reg):
+        N = len(U)
+        return tuple(self._call("ddp_backward", N, _knots(N, X, U, P, Lam, LamN) + [(C, N, "x"), rho, reg],
+                                [(N, "policy"), (0, 4), (N + 1, "value")]))
+
+    def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
+        N = len(U)
+        policy, summary, values, J, G, GN, C = self._call(
+            "ddp_evaluate_backward", N, _knots(N, X, U, P, Lam, LamN) + [rho, reg],
+            [(N, "policy"), (0, 4), (N + 1, "value"), (0, 1), (N, "g"), (0, "gN"), (N, "x")])
+        return (float(J[0]), G, GN, C), (policy, summary, values)
+
+    def gradient(self, X, U, P, Lam, LamN, policy, rho):
+        N = len(U)
+        stat, costates = self._call("ddp_gradient", N, _knots(N, X, U, P, Lam, LamN) + [(policy, N, "policy"), rho],
+                                    [(0, 1), (N + 1, "x")])
+        return float(stat[0]), costates
+
+    def forward(self, X, U, P, policy, C, alpha):
+        N = len(U)
+        Xn, Un, J, G, GN = self._call("ddp_forward", N, _knots(N, X, U, P) + [(policy, N, "policy"), (C, N, "x"), alpha],
+                                      [(N + 1, "x"), (N, "u"), (0, 1), (N, "g"), (0, "gN")])
+        return Xn, Un, float(J[0]), G, GN
+
+    def evaluate(self, X, U, P):
+        N = len(U)
+        J, G, GN, C = self._call("ddp_evaluate", N, _knots(N, X, U, P), [(0, 1), (N, "g"), (0, "gN"), (N, "x")])
+        return float(J[0]), G, GN, C
+
+
+def _knots(N, X, U, P, Lam=None, LamN=None):
+    """The per-knot arguments with their expected sizes."""
+    args = [(X, N + 1, "x"), (U, N, "u"), (P, N + 1, "p")]
+    return args if Lam is None else args + [(Lam, N, "g"), (LamN, 1, "gN")]
+
+
+def _bind(library: ctypes.CDLL) -> None:
+    """Argument types of the driver's entry points: pointers, the horizon (int) and scalars (double)."""
+    if getattr(library, "_ddp_bound", False):
+        return
+    ptr, dbl = ctypes.c_void_p, ctypes.c_double
+    library.ddp_work_new.restype = ptr
+    library.ddp_work_new.argtypes = [ctypes.c_int] * 5
+    library.ddp_work_free.argtypes = [ptr]
+    counts = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
+              "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}  # input arrays, doubles, output arrays
+    for name, (arrays, doubles, outputs) in counts.items():
+        fn = getattr(library, name)
+        fn.restype = ctypes.c_int
+        fn.argtypes = [ptr, ctypes.c_int] + [ptr] * arrays + [dbl] * doubles + [ptr] * outputs
+    library._ddp_bound = True
+
+
 class NumpyBackend:
     """Fallback: derivatives in one batched CasADi call (map), Riccati and rollout as numpy loops."""
 
     name = "numpy"
 
     def __init__(self, problem, settings, layout):
-        passes, knots = build_passes(problem, settings, layout)
+        knots = knot_functions(problem, settings, layout)
         self.problem, self.settings, self.layout = problem, settings, layout
-        self._evaluate = passes["evaluate"]
+        self._eval = knots["eval"].map(problem.horizon)
         self._fwd, self._end = knots["fwd"], knots["end"]
         model, (x, u, p, lam, _, rho) = knots["model"], knots["syms"]
         names = ["A", "B", "lx", "lu", "lxx", "luu", "lux"]
@@ -351,25 +529,30 @@ class NumpyBackend:
 
     def forward(self, X, U, P, policy, C, alpha):
         X, U, P, policy, C = X.T, U.T, P.T, policy.T, C.T
-        N, nu = self.problem.horizon, self.problem.nu
-        Xn = np.empty_like(X)
-        Xn[:, 0] = X[:, 0]
-        stages = []
+        N = self.problem.horizon
+        Xn, Un = np.empty_like(X), np.empty_like(U)
+        G = np.empty((self.problem.n_constraints, N))
+        Xn[:, 0], J = X[:, 0], 0.0
         for t in range(N):
-            x_next, stage = self._fwd(Xn[:, t], X[:, t], U[:, t], policy[:, t], C[:, t], P[:, t], alpha)
-            Xn[:, t + 1] = np.asarray(x_next).ravel()
-            stages.append(np.asarray(stage).ravel())
-        stage = np.array(stages).T
+            x_next, u, cost, g = (v.full().ravel() for v in
+                                  self._fwd(Xn[:, t], X[:, t], U[:, t], policy[:, t], C[:, t], P[:, t], alpha))
+            Xn[:, t + 1], Un[:, t], G[:, t] = x_next, u, g
+            J += float(cost[0])
         costN, gN = self._end(Xn[:, N], P[:, N])
-        return (Xn.T.copy(), stage[:nu].T.copy(), float(stage[nu].sum() + costN), stage[nu + 1:].T.copy(),
-                np.asarray(gN).ravel())
+        return Xn.T.copy(), Un.T.copy(), J + float(costN), G.T.copy(), gN.full().ravel()
 
     def evaluate(self, X, U, P):
-        J, G, GN, C = self._evaluate(X.T, U.T, P.T)
-        return float(J), G.full().T.copy(), GN.full().ravel(), C.full().T.copy()
+        N = self.problem.horizon
+        cost, G, C = self._eval(X[:N].T, U.T, P[:N].T, X[1:].T)
+        costN, gN = self._end(X[N], P[N])
+        return float(cost.full().sum() + costN), G.full().T.copy(), gN.full().ravel(), C.full().T.copy()
 
 
 def make_backend(problem, settings, layout):
     if settings.backend == "numpy":
         return NumpyBackend(problem, settings, layout)
-    return CasadiBackend(problem, settings, layout, compiled=settings.backend == "codegen")
+    if settings.backend == "codegen":
+        library = compiled_library(problem, settings, layout)
+        if library is not None:
+            return CompiledBackend(problem, library)
+    return CasadiBackend(problem, settings, layout)

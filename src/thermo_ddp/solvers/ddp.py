@@ -101,7 +101,7 @@ class DDPSettings:
     infeasibility_growth: float = 1e3       # "infeasible" if the violation has not halved while rho grew this much
     box_iterations: int = 2                 # projected-Newton passes per knot (nu > 1)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
-    compiler_flags: tuple = ("-O2", "-march=native")  # gcc; 2-3x faster code than -O1 for the 7-DOF arm
+    compiler_flags: tuple = ("-O2", "-march=native")  # gcc; big generated files at -O1/-O0 (see codegen)
 
     def __post_init__(self):
         ints = ("max_iterations", "box_iterations", "inner_max_iterations")
