@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from thermo_ddp.diagnose.selection import SubsetFit, SubsetSettings, nested_test, subset_select
+from thermo_ddp.diagnose.selection import SubsetFit, SubsetSettings, nested_test, select_held_out, subset_select
 from thermo_ddp.diagnose.thermal import diagnose_thermal, diagnose_thermal_files, iron_max, term_specs
 from thermo_ddp.errors import InputError
 from thermo_ddp.identify.thermal import load_joint_parameters
@@ -159,6 +159,30 @@ def test_nested_test_corrects_for_autocorrelation_and_bonferroni():
     sel = subset_select([small, strong, only_b, both], SubsetSettings())
     assert sel.chosen is strong and sel.best is both  # b adds < 10 % RMSE: the smaller set wins
     assert set(sel.term_tests) == {"a"} and sel.n_tests == 3
+
+
+def test_a_term_is_named_only_if_it_lowers_the_held_out_error():
+    """Known held-out errors: 'a' wins in sample (RSS 100 -> 60) but predicts held-out segments worse;
+    it is withdrawn and the selection repeated without it picks 'b' (RSS 100 -> 70), which holds out
+    better; the fixed term is never judged, a term the data cannot judge held out (None) stays; without
+    held-out data the in-sample choice stands."""
+    base = SubsetFit(frozenset({"f"}), rss=100.0, n=1000, n_parameters=3)
+    a = SubsetFit(frozenset({"f", "a"}), rss=60.0, n=1000, n_parameters=4)
+    b = SubsetFit(frozenset({"f", "b"}), rss=70.0, n=1000, n_parameters=4)
+    ab = SubsetFit(frozenset({"f", "a", "b"}), rss=59.0, n=1000, n_parameters=5)
+    rmse = {base.terms: 1.0, a.terms: 1.05, b.terms: 0.8, ab.terms: 0.85}
+    asked = []
+
+    def held_out(term, with_term, without):
+        asked.append(term)
+        return rmse[with_term], rmse[without]
+    sel, checks = select_held_out([base, a, b, ab], held_out, frozenset({"f"}))
+    assert sel.chosen is b and sel.n_tests == 1 and asked == ["a", "b"]
+    assert not checks["a"].improves and checks["b"].improves and set(checks) == {"a", "b"}
+    assert str(checks["a"]) == "held-out RMSE 1 K without it, 1.05 K with it"
+    sel, checks = select_held_out([base, a, b, ab], lambda *args: None, frozenset({"f"}))
+    assert sel.chosen is a and checks == {}
+    assert select_held_out([base, a, b, ab], None, frozenset({"f"}))[0].chosen is a
 
 
 def test_physical_bounds_and_bad_input():
