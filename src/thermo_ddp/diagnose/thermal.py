@@ -27,7 +27,11 @@ that test against the set without it wins.  Every fit searches inside the physic
 they cannot pose as strong friction heat); parameters the data do not pin down (relative standard
 error >= 50 %) and their collinear partners are reported, never used to reject a term.  A casing
 node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
-the drive node of ``two_node_drive``) and is listed in ``not_determinable``.
+the drive node of ``two_node_drive``) and is listed in ``not_determinable``.  With several segments
+(recordings, or stretches between gaps) every term of the chosen set is also judged leaving one segment
+out (:func:`~thermo_ddp.diagnose.selection.select_held_out`): a term that does not lower the held-out
+RMSE is withdrawn (``not_determinable`` says why) and the selection repeated without it.  A chosen
+running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
 is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the
