@@ -561,7 +561,7 @@ def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) 
     moving = any(g.has_velocity and np.any(np.abs(g.velocity) > MOVING_RAD_S) for g in grids)
     for term in candidates:
         require(term in THERMAL_TERMS, "diagnose", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
-        if term in ("friction_heating", "iron_losses") and not moving:
+        if term in SPEED_TERMS and not moving:
             skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
                             "experiment": EXPERIMENTS[term]})
         else:
