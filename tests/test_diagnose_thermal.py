@@ -65,6 +65,23 @@ def test_report_experiments_name_friction_drive_and_the_casing_node(both_effects
     assert params.thermal["drive_idle_w"] == pytest.approx(truth.drive_idle_w, rel=0.2)
     assert params.thermal["casing_capacity_j_per_k"] == pytest.approx(truth.casing_capacity_j_per_k, rel=0.15)
     assert out["speed_source"]["biceps"] == "velocity"
+    # every named term lowers the error of recordings predicted by fits of the others; friction heat only on
+    # the static holds (the statics' few touches cannot predict the biceps curl's speeds)
+    held = out["validation"]["leave_one_segment_out"]
+    assert held["segments"] == ["static_3a", "static_4a"] and held["rmse_after"] < held["rmse_before"]
+    assert all(held["terms"][t]["rmse_with"] < held["terms"][t]["rmse_without"] for t in d.missing_physics)
+
+
+def test_one_recording_moving_is_diagnosed_without_a_held_out_segment():
+    """One recording without gaps and strong friction heat: nothing to leave out; the speed-driven term is
+    named on the in-sample tests alone."""
+    truth = ThreeNodeTruth(concealed=frozenset({"friction_heating"}), friction_linear_w_s_per_rad=4.0,
+                           friction_quadratic_w_s2_per_rad2=1.5)
+    rec = record(truth, np.random.default_rng(1), name="one", duration_s=10800.0, noise_c=0.05, sample_s=2.0,
+                 jitter=0.2, gaps=0, ambient_drift_c=1.0)
+    out = diagnose_thermal(rec, candidates=SPECIFIC).to_dict()
+    assert out["success"] and [m["term"] for m in out["missing_physics"]] == ["friction_heating"]
+    assert "leave_one_segment_out" not in out["validation"] and out["rows"]["segments"] == 1
 
 
 def test_nothing_missing_gives_empty_missing_physics(tmp_path):

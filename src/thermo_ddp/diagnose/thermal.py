@@ -310,10 +310,10 @@ class _Fitter:
     def covered(self, term: str, r: int) -> bool:
         """Segment ``r`` can judge ``term`` held out: the other segments reach its speeds (95th percentile of
         |v|) when the term is driven by speed; a fit of standing recordings says nothing about motion."""
-        if term not in SPEED_TERMS:
-            return True
-        top = [float(np.percentile(np.abs(g.velocity), 95)) for g in self.grids]
-        return top[r] <= max(t for k, t in enumerate(top) if k != r)
+        top = [float(np.percentile(np.abs(g.velocity), 95)) for k, g in enumerate(self.grids) if k != r]
+        if not top:
+            return False  # no other segment to fit
+        return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
 
     def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
         """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none)."""
