@@ -430,9 +430,10 @@ def plot_summary(result: LoopResult, path: Path) -> Path:
 
 def identify_models(recording_files, out_dir: Path,
                     settings: LoopSettings) -> tuple[ThermalDiagnosis, ThermalFit, dict[str, Path]]:
-    """Diagnose the recordings (contract CSV files, or recordings read through a column map); re-identify the diagnosed structure on every sample (:func:`refit`);
-    write the ORIGINAL (identified one-node baseline, constant ambient, no friction heat) and IMPROVED
-    (the re-identified diagnosed structure) parameter files into ``out_dir``."""
+    """Diagnose the recordings (contract CSV files, or recordings read through a column map); re-identify
+    the diagnosed structure on every sample (:func:`refit`); write the ORIGINAL (identified one-node baseline,
+    constant ambient, no friction heat) and IMPROVED (the re-identified diagnosed structure) parameter files
+    into ``out_dir``."""
     diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
     if not diagnosis.success:
         raise RunFailed("the loop's diagnosis", diagnosis.status, diagnosis.message)
