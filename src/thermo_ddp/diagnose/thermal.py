@@ -316,9 +316,11 @@ class _Fitter:
         return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
 
     def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
-        """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none)."""
+        """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none, or
+        no usable fold fit of either set)."""
         segments = [r for r in range(len(self.grids)) if self.covered(term, r)]
-        return (self.segment_rmse(with_term, segments), self.segment_rmse(without, segments)) if segments else None
+        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without)) if segments else ()
+        return scores if any(map(math.isfinite, scores)) else None
 
 
 def _labels(fit: ThermalFit) -> np.ndarray:
