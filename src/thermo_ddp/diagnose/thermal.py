@@ -308,11 +308,13 @@ class _Fitter:
         return float(np.sqrt(np.mean(np.concatenate([folds[r] for r in chosen]) ** 2)))
 
     def covered(self, term: str, r: int) -> bool:
-        """Segment ``r`` can judge ``term`` held out: the other segments reach its speeds (95th percentile of
-        |v|) when the term is driven by speed; a fit of standing recordings says nothing about motion."""
-        top = [float(np.percentile(np.abs(g.velocity), 95)) for k, g in enumerate(self.grids) if k != r]
-        if not top:
-            return False  # no other segment to fit
+        """Segment ``r`` can judge ``term`` held out: the other segments hold at least as many samples (a fit
+        of less data than it predicts extrapolates) and, when the term is driven by speed, reach its speeds
+        (95th percentile of |v|: a fit of standing recordings says nothing about motion)."""
+        others = [g for k, g in enumerate(self.grids) if k != r]
+        if sum(len(g) for g in others) < len(self.grids[r]):
+            return False
+        top = [float(np.percentile(np.abs(g.velocity), 95)) for g in others]
         return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
 
     def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
@@ -500,7 +502,8 @@ class ThermalDiagnosis:
             out["validation"]["leave_one_segment_out"] = {
                 "method": "each segment (recording or stretch between gaps) predicted from its first measurement "
                           "by a fit of the other segments; a term is named only if it lowers this held-out RMSE "
-                          "(a speed-driven term judged on the segments whose speeds the others reach)",
+                          "(judged on segments the others outnumber in samples and, for a speed-driven term, "
+                          "reach in speed)",
                 "segments": list(self.segment_cv[2]), "rmse_before": self.segment_cv[0], "rmse_after": self.segment_cv[1],
                 "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "named": t in self.missing_physics}
                           for t, c in self.held_out.items()}}
