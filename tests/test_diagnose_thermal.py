@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 
-from thermo_ddp.diagnose.selection import SubsetFit, SubsetSettings, nested_test, subset_select
+from thermo_ddp.diagnose.selection import SubsetFit, SubsetSettings, nested_test, select_held_out, subset_select
 from thermo_ddp.diagnose.thermal import diagnose_thermal, diagnose_thermal_files, iron_max, term_specs
 from thermo_ddp.errors import InputError
 from thermo_ddp.identify.thermal import load_joint_parameters
@@ -65,6 +65,23 @@ def test_report_experiments_name_friction_drive_and_the_casing_node(both_effects
     assert params.thermal["drive_idle_w"] == pytest.approx(truth.drive_idle_w, rel=0.2)
     assert params.thermal["casing_capacity_j_per_k"] == pytest.approx(truth.casing_capacity_j_per_k, rel=0.15)
     assert out["speed_source"]["biceps"] == "velocity"
+    # every named term lowers the error of recordings predicted by fits of the others; friction heat only on
+    # the static holds (the statics' few touches cannot predict the biceps curl's speeds)
+    held = out["validation"]["leave_one_segment_out"]
+    assert held["segments"] == ["static_3a", "static_4a"] and held["rmse_after"] < held["rmse_before"]
+    assert all(held["terms"][t]["rmse_with"] < held["terms"][t]["rmse_without"] for t in d.missing_physics)
+
+
+def test_one_recording_moving_is_diagnosed_without_a_held_out_segment():
+    """One recording without gaps and strong friction heat: nothing to leave out; the speed-driven term is
+    named on the in-sample tests alone."""
+    truth = ThreeNodeTruth(concealed=frozenset({"friction_heating"}), friction_linear_w_s_per_rad=4.0,
+                           friction_quadratic_w_s2_per_rad2=1.5)
+    rec = record(truth, np.random.default_rng(1), name="one", duration_s=10800.0, noise_c=0.05, sample_s=2.0,
+                 jitter=0.2, gaps=0, ambient_drift_c=1.0)
+    out = diagnose_thermal(rec, candidates=SPECIFIC).to_dict()
+    assert out["success"] and [m["term"] for m in out["missing_physics"]] == ["friction_heating"]
+    assert "leave_one_segment_out" not in out["validation"] and out["rows"]["segments"] == 1
 
 
 def test_nothing_missing_gives_empty_missing_physics(tmp_path):
@@ -159,6 +176,30 @@ def test_nested_test_corrects_for_autocorrelation_and_bonferroni():
     sel = subset_select([small, strong, only_b, both], SubsetSettings())
     assert sel.chosen is strong and sel.best is both  # b adds < 10 % RMSE: the smaller set wins
     assert set(sel.term_tests) == {"a"} and sel.n_tests == 3
+
+
+def test_a_term_is_named_only_if_it_lowers_the_held_out_error():
+    """Known held-out errors: 'a' wins in sample (RSS 100 -> 60) but predicts held-out segments worse;
+    it is withdrawn and the selection repeated without it picks 'b' (RSS 100 -> 70), which holds out
+    better; the fixed term is never judged, a term the data cannot judge held out (None) stays; without
+    held-out data the in-sample choice stands."""
+    base = SubsetFit(frozenset({"f"}), rss=100.0, n=1000, n_parameters=3)
+    a = SubsetFit(frozenset({"f", "a"}), rss=60.0, n=1000, n_parameters=4)
+    b = SubsetFit(frozenset({"f", "b"}), rss=70.0, n=1000, n_parameters=4)
+    ab = SubsetFit(frozenset({"f", "a", "b"}), rss=59.0, n=1000, n_parameters=5)
+    rmse = {base.terms: 1.0, a.terms: 1.05, b.terms: 0.8, ab.terms: 0.85}
+    asked = []
+
+    def held_out(term, with_term, without):
+        asked.append(term)
+        return rmse[with_term], rmse[without]
+    sel, checks = select_held_out([base, a, b, ab], held_out, frozenset({"f"}))
+    assert sel.chosen is b and sel.n_tests == 1 and asked == ["a", "b"]
+    assert not checks["a"].improves and checks["b"].improves and set(checks) == {"a", "b"}
+    assert str(checks["a"]) == "held-out RMSE 1 K without it, 1.05 K with it"
+    sel, checks = select_held_out([base, a, b, ab], lambda *args: None, frozenset({"f"}))
+    assert sel.chosen is a and checks == {}
+    assert select_held_out([base, a, b, ab], None, frozenset({"f"}))[0].chosen is a
 
 
 def test_physical_bounds_and_bad_input():

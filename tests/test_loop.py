@@ -9,6 +9,7 @@ comparison at 84 and 140 °C runs in tests/test_notebook_loop.py.
 """
 import csv
 import json
+import tomllib
 
 import numpy as np
 import pytest
@@ -16,21 +17,43 @@ import pytest
 from thermo_ddp.model.actuated import load_model
 from thermo_ddp.model.arm import ELBOW
 from thermo_ddp.errors import InputError
-from thermo_ddp.studies.loop import (LoopSettings, claim, loop_files, mpc_settings, robot_parameters,
-                             truth_model, truth_parameters)
+from thermo_ddp.cli import main
+from thermo_ddp.outputs import write_folder_atomically
+from thermo_ddp.recordings import column_map_from_dict, read_recordings
+from thermo_ddp.studies.loop import (LoopSettings, claim, loop_files, mpc_settings, record_experiments, robot_parameters,
+                                     truth_model, truth_parameters)
 from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
 from thermo_ddp.mpc.plant import Measurement
 from thermo_ddp.model.parameters import load_parameters
 from thermo_ddp.studies.testbed import JOINT, PlantParameters, steady_state
 from thermo_ddp.studies.testbed.physics import thermal_network
 
+def load_column_map_text(text: str):
+    return column_map_from_dict(tomllib.loads(text), "robot_log.toml")
+
+
 LIMIT_C = 84.0
+# The robot logs in its own names and units (--columns): current in mA, speed in deg/s, the chain reads them back.
+ROBOT_LOG = """
+[time]
+column = "stamp"
+[columns]
+current_a = { column = "motor_current_ma", scale = 0.001 }
+temperature_c = "joint_temp"
+position = "q"
+velocity = { column = "dq_deg_s", scale = 0.017453292519943295 }
+effort = "tau"
+ambient_c = "room"
+voltage_v = "motor_voltage"
+"""
 
 
 @pytest.fixture(scope="module")
 def chain(tmp_path_factory):
     out = tmp_path_factory.mktemp("loop")
-    table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True)
+    columns = tmp_path_factory.mktemp("map") / "robot_log.toml"
+    columns.write_text(ROBOT_LOG)
+    table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True, columns=columns)
     return out, table
 
 
@@ -106,7 +129,13 @@ def test_chain_writes_recordings_models_figures_and_table(chain):
     for name in ("static_3a", "static_4a", "biceps", "winding_pulses"):
         with (out / "recordings" / f"{name}.csv").open() as handle:
             header = next(csv.reader(handle))
-        assert header[0] == "time_s" and {"temperature_c", "voltage_v"} <= set(header) and "winding_c" not in header
+        assert header == ["stamp", "motor_current_ma", "joint_temp", "q", "dq_deg_s", "tau", "room", "motor_voltage"]
+    # the logs, read through the map, are the robot's recordings (the testbed's own arrays)
+    robot, settings = robot_parameters(), LoopSettings.short(limits_c=(LIMIT_C,), hold_s=20.0, oracle=True)
+    biceps = next(r for r in record_experiments(robot, settings) if r.name == "biceps")
+    read, = read_recordings([out / "recordings" / "biceps.csv"], load_column_map_text(ROBOT_LOG)).recordings
+    for column in ("time_s", "current_a", "velocity", "temperature_c"):
+        np.testing.assert_allclose(getattr(read, column), biceps.columns[column], rtol=1e-12, atol=1e-12)
     original = load_parameters(out / "models" / f"{ELBOW}_original.toml")
     improved = load_parameters(out / "models" / f"{ELBOW}_improved.toml")
     assert original.thermal.model == "one_node" and original.thermal["friction_heating_fraction"] == 0.0
@@ -175,3 +204,32 @@ def test_with_the_true_parameters_the_same_controller_keeps_a_small_margin(chain
     claim_ = table["claims"][0]
     assert claim_["oracle_hold_s"] == truth["closed_loop_hold_s"]
     assert claim_["improved_hold_share_of_oracle"] == pytest.approx(impr["closed_loop_hold_s"] / truth["closed_loop_hold_s"])
+
+
+@pytest.mark.parametrize("body, words", [
+    ('[time]\nstep_s = 1.0\n[columns]\ncurrent_a = "i"\ntemperature_c = "t"\n', ["time.step_s", "time column"]),
+    ('[time]\ncolumn = "s"\n[columns]\ncurrent_a = { norm = ["i_d", "i_q"] }\ntemperature_c = "t"\n',
+     ["columns.current_a.norm", "cannot be written back"]),
+    ('[time]\ncolumn = "s"\n[columns]\ntemperature_c = "t"\n', ["columns.current_a", "diagnosis reads it"]),
+    ('[time]\ncolumn = "s"\n[columns]\ncurrent_a = "i"\ntemperature_c = "i"\n', ["columns.temperature_c", "another"]),
+    ('[time]\ncolumn = "s"\n[columns]\ncurrent_a = "i"\ntemperature_c = "t"\n[rows]\nsplit = 1\n', ["rows.split", "unknown"]),
+])
+def test_loop_refuses_a_column_map_it_cannot_log_by_before_any_work(tmp_path, capsys, monkeypatch, body, words):
+    def no_work(*args, **kwargs):
+        raise AssertionError("the experiments started")
+    monkeypatch.setattr("thermo_ddp.studies.loop.record_experiments", no_work)
+    columns = tmp_path / "map.toml"
+    columns.write_text(body)
+    assert main(["loop", "--short", "--out", str(tmp_path / "out"), "--columns", str(columns)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(columns) in err and all(w in err for w in words), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_loop_refuses_a_column_map_inside_its_output_folder(tmp_path, capsys, monkeypatch):
+    """An earlier run's folder is replaced by the next run: a map kept in it would be lost."""
+    monkeypatch.setattr("thermo_ddp.studies.loop.record_experiments", lambda *a, **k: 1 / 0)
+    write_folder_atomically(tmp_path / "out", lambda folder: (folder / "map.toml").write_text(ROBOT_LOG))
+    columns = tmp_path / "out" / "map.toml"
+    assert main(["loop", "--short", "--out", str(tmp_path / "out"), "--columns", str(columns)]) == 2
+    assert "inside the output folder" in capsys.readouterr().err and columns.read_text() == ROBOT_LOG

@@ -20,5 +20,10 @@ def test_real_motors_notebook(tmp_path, monkeypatch):
     for joint, r in result["ur3"].items():
         assert r["success"] and r["later_rmse"] <= 1.0, joint
         assert r["rows"] == {"used": 7355, "skipped": 54, "segments": 3}
+        # no missing physics claimed unless it improves the held-out fit: leaving one stretch out, and on the later one
+        for term in r["missing_physics"]:
+            assert r["held_out"]["terms"][term]["rmse_with"] < r["held_out"]["terms"][term]["rmse_without"], joint
+            assert r["later_rmse"] <= r["later_rmse_without"][term], (joint, term)
+        assert not any(t["named"] for name, t in r["held_out"]["terms"].items() if name not in r["missing_physics"])
     assert "identified on first 75 %" in text
     assert (tmp_path / "paderborn_later.png").stat().st_size > 10_000

@@ -57,7 +57,7 @@ def _compare(args, out: Outputs) -> int:
 
 def _loop(args, out: Outputs) -> int:
     from .studies.loop import loop_files
-    options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle}
+    options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle, "columns": args.columns}
     if args.hold_s is not None:
         options["hold_s"] = args.hold_s
     table = loop_files(args.out, short=args.short, **options)
@@ -305,6 +305,9 @@ def _loop_parser() -> _Parser:
     cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=[84.0, 140.0],
                      help="winding limits, °C (default %(default)s)")
     cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters")
+    cmd.add_argument("--columns", metavar="MAP.toml", help="column map: the robot logs its recordings in the map's own "
+                                                           "column names and the chain reads them through it "
+                                                           "(default: contract columns)")
     return cmd
 
 

@@ -198,6 +198,35 @@ class ColumnMap:
         names = ([self.time_column] if self.time_column else []) + [c for s in self.columns.values() for c in s.columns]
         return tuple(dict.fromkeys(names))
 
+    def check_writable(self, available: Sequence[str]) -> None:
+        """Refuse, before any work, a map that a logger of the contract columns ``available`` cannot write
+        a CSV for (:meth:`write_csv`): a fixed step instead of a time column, a norm (not invertible), a
+        zero scale, a contract column the logger lacks, or two columns written under one name."""
+        if self.time_column is None:
+            raise _map_error(self.source, "time.step_s", self.step_s, "a logger with time stamps writes a time "
+                             "column: give [time] column")
+        names = [self.time_column]
+        for contract, src in self.columns.items():
+            key = f"columns.{contract}"
+            if contract not in available:
+                raise _map_error(self.source, key, src.columns[0], f"not logged here; logged: {', '.join(available)}")
+            if src.norm:
+                raise _map_error(self.source, f"{key}.norm", list(src.columns), "a norm cannot be written back")
+            if src.scale == 0:
+                raise _map_error(self.source, f"{key}.scale", src.scale, "must not be 0 to be written back")
+            if src.columns[0] in names:
+                raise _map_error(self.source, key, src.columns[0], "another mapped column has this name")
+            names.append(src.columns[0])
+
+    def write_csv(self, path: str | Path, signals: Mapping[str, np.ndarray]) -> Path:
+        """Write the contract ``signals`` (``time_s`` and every mapped column) as the CSV this map reads
+        back: each under its source name, as ``(value - offset) / scale``; time in seconds."""
+        table = {self.time_column: np.asarray(signals["time_s"], float)}
+        for contract, src in self.columns.items():
+            table[src.columns[0]] = (np.asarray(signals[contract], float) - src.offset) / src.scale
+        pd.DataFrame(table).to_csv(path, index=False, float_format="%.17g")
+        return Path(path)
+
     @classmethod
     def contract(cls, header: Sequence[str], source: str) -> "ColumnMap":
         """The identity map of a contract CSV (never split: the recording is one piece)."""

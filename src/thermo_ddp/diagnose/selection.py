@@ -306,3 +306,48 @@ def subset_select(fits: Sequence[SubsetFit], settings: SubsetSettings | None = N
     tests = {t: nested_test(by_terms[chosen.terms - {t}], chosen) for t in sorted(chosen.terms)
              if chosen.terms - {t} in by_terms}
     return SubsetSelection(chosen, best, equivalent, tests, n_tests, tuple(fits))
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldOutCheck:
+    """A term of a chosen set judged on data no fit saw: the held-out RMSE of the set with the term and
+    of the set without it (e.g. leave one segment out: each segment predicted by a fit of the others)."""
+
+    term: str
+    with_term: float
+    without: float
+
+    @property
+    def improves(self) -> bool:
+        return self.with_term < self.without
+
+    def __str__(self) -> str:
+        return f"held-out RMSE {self.without:.3g} K without it, {self.with_term:.3g} K with it"
+
+
+HeldOut = Callable[[str, frozenset, frozenset], "tuple[float, float] | None"]
+
+
+def select_held_out(fits: Sequence[SubsetFit], held_out: HeldOut | None, fixed: frozenset = frozenset(),
+                    settings: SubsetSettings | None = None) -> tuple[SubsetSelection | None, dict[str, HeldOutCheck]]:
+    """:func:`subset_select`, then every term of the chosen set (but the ``fixed`` ones) judged on held-out
+    data: ``held_out(term, chosen, chosen - {term})`` gives the held-out RMSE of both sets (None when these
+    data cannot judge the term that way).  A term that does not lower it is withdrawn and the selection
+    repeated among the sets without it, until every judged term of the chosen set lowers the held-out
+    error.  Returns the selection and the last verdict on every judged term (withdrawn ones included)."""
+    withdrawn: set[str] = set()
+    checks: dict[str, HeldOutCheck] = {}
+    while True:
+        selection = subset_select([f for f in fits if not f.terms & withdrawn], settings)
+        if selection is None or held_out is None:
+            return selection, checks
+        chosen = selection.chosen.terms
+        scores = {t: held_out(t, chosen, chosen - {t}) for t in sorted(chosen - fixed)}
+        verdicts = {t: HeldOutCheck(t, *score) for t, score in scores.items() if score is not None}
+        checks.update(verdicts)
+        failed = {t for t, c in verdicts.items() if not c.improves}
+        for term in sorted(failed):
+            log.info("%s withdrawn: %s", term, verdicts[term])
+        if not failed:
+            return selection, checks
+        withdrawn |= failed

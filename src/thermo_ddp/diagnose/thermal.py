@@ -27,7 +27,11 @@ that test against the set without it wins.  Every fit searches inside the physic
 they cannot pose as strong friction heat); parameters the data do not pin down (relative standard
 error >= 50 %) and their collinear partners are reported, never used to reject a term.  A casing
 node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
-the drive node of ``two_node_drive``) and is listed in ``not_determinable``.
+the drive node of ``two_node_drive``) and is listed in ``not_determinable``.  With several segments
+(recordings, or stretches between gaps) every term of the chosen set is also judged leaving one segment
+out (:func:`~thermo_ddp.diagnose.selection.select_held_out`): a term that does not lower the held-out
+RMSE is withdrawn (``not_determinable`` says why) and the selection repeated without it.  A chosen
+running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
 is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the
@@ -58,7 +62,7 @@ from ..recordings import as_recordings, read_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
                                 noise_model, thermal_regimes)
 from .localise import Localisation, ResidualSeries
-from .selection import SubsetFit, SubsetSelection, SubsetSettings, TermSpec, subset_select
+from .selection import HeldOutCheck, SubsetFit, SubsetSelection, SubsetSettings, TermSpec, select_held_out
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +78,12 @@ NO_LOAD_CURRENT_SHARE = 0.02
 # A drive idles at up to 100 W in the Talos class (the elbow's 23 W, report), or at up to 5 times the motor's
 # rated copper loss R I_nom^2 for larger drives.
 DRIVE_IDLE_SHARE = 5.0
+# Speeds: a joint turning slower than this is at rest; moving samples whose speeds lie within this factor
+# (5th to 95th percentile) are one speed; a motor moving in this share of the samples never rests.
+MOVING_RAD_S = 0.05
+ONE_SPEED_SPREAD = 1.25
+ALWAYS_MOVING = 0.9
+SPEED_TERMS = ("friction_heating", "iron_losses")
 # Ranges of capacities and resistances also hold the parameter file's own value within this factor.
 FILE_VALUE_FACTOR = 10.0
 # The experiment that separates each term from what it can be confused with.
@@ -206,6 +216,7 @@ class _Fitter:
         self.bounds = {k: b for spec in specs.values() for k, b in spec.bounds.items()}
         self.fits: dict[frozenset, ThermalFit] = {}
         self._models: dict[frozenset, ThermalModel] = {}
+        self._held_out: dict[frozenset, list[np.ndarray]] = {}
 
     def model(self, terms: frozenset) -> ThermalModel:
         if terms not in self._models:
@@ -272,6 +283,46 @@ class _Fitter:
             self.bar.update(1)
             cv[every == b] = held.residuals[every == b]
         return float(np.sqrt(np.mean(cv ** 2)))
+
+    def folds(self, terms: frozenset) -> list[np.ndarray]:
+        """Leave one segment out: the residuals of each segment (a recording, or a stretch between gaps)
+        predicted open-loop from its own first measurements by a fit of the other segments (inf when that
+        fit is not usable)."""
+        if terms not in self._held_out:
+            full, model = self.fits[terms], self.model(terms)
+            offsets = [full.initial_offset_c[g.name] for g in self.grids]
+            ends, out = np.cumsum([0] + [len(g) for g in self.grids]), []
+            for r in range(len(self.grids)):
+                weights = [np.full(len(g), float(k != r)) for k, g in enumerate(self.grids)]
+                held = fit_grids(model, self.grids, start=dict(full.parameters), offsets=offsets, weights=weights,
+                                 settings=self.settings.fit, bounds=self.bounds)
+                self.bar.update(1)
+                out.append(held.residuals[ends[r]:ends[r + 1]] if self.usable(held) else np.array([np.inf]))
+            self._held_out[terms] = out
+        return self._held_out[terms]
+
+    def segment_rmse(self, terms: frozenset, segments: Sequence[int] | None = None) -> float:
+        """Pooled leave-one-segment-out RMSE over ``segments`` (all by default)."""
+        folds = self.folds(terms)
+        chosen = range(len(folds)) if segments is None else segments
+        return float(np.sqrt(np.mean(np.concatenate([folds[r] for r in chosen]) ** 2)))
+
+    def covered(self, term: str, r: int) -> bool:
+        """Segment ``r`` can judge ``term`` held out: the other segments hold at least as many samples (a fit
+        of less data than it predicts extrapolates) and, when the term is driven by speed, reach its speeds
+        (95th percentile of |v|: a fit of standing recordings says nothing about motion)."""
+        others = [g for k, g in enumerate(self.grids) if k != r]
+        if sum(len(g) for g in others) < len(self.grids[r]):
+            return False
+        top = [float(np.percentile(np.abs(g.velocity), 95)) for g in others]
+        return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
+
+    def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
+        """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none, or
+        no usable fold fit of either set)."""
+        segments = [r for r in range(len(self.grids)) if self.covered(term, r)]
+        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without)) if segments else ()
+        return scores if any(map(math.isfinite, scores)) else None
 
 
 def _labels(fit: ThermalFit) -> np.ndarray:
@@ -364,6 +415,8 @@ class ThermalDiagnosis:
     cv_blocks: int = 3
     hosted: frozenset = frozenset()  # in the final structure, not evidenced by the data (not named)
     baseline_terms: frozenset = frozenset()  # in every fitted set, never tested (the room's stand-in, see ROOM_NOTE)
+    held_out: Mapping[str, HeldOutCheck] = dataclasses.field(default_factory=dict)  # leave one segment out, per term
+    segment_cv: tuple[float, float, tuple[str, ...]] | None = None  # leave one segment out: baseline, final, segments
 
     @property
     def final_terms(self) -> frozenset:
@@ -406,6 +459,8 @@ class ThermalDiagnosis:
                     f"RMSE {without.rmse:.3g} -> {fit.rmse:.3g} K (-{100 * test.rmse_drop:.0f}%), likelihood ratio "
                     f"{test.statistic:.1f} on {test.df} df, p = {test.p_value:.2g} ({self.selection.n_tests} models "
                     f"compared, effective samples n/tau = {test.large.n / test.large.tau:.0f}); explains {where}")
+        if term in self.held_out:
+            evidence += f"; leaving one segment out: {self.held_out[term]}"
         if term == "friction_heating":
             evidence += "; " + self._friction_ratio(fit)
         return {"term": term, "evidence": evidence,
@@ -443,6 +498,15 @@ class ThermalDiagnosis:
                                            "recording, each predicted (open-loop simulation) by a fit that did not "
                                            "see it (held-out RMSE)",
                                  "rmse_before": self.cv_rmse[0], "rmse_after": self.cv_rmse[1]}
+        if self.segment_cv is not None:
+            out["validation"]["leave_one_segment_out"] = {
+                "method": "each segment (recording or stretch between gaps) predicted from its first measurement "
+                          "by a fit of the other segments; a term is named only if it lowers this held-out RMSE "
+                          "(judged on segments the others outnumber in samples and, for a speed-driven term, "
+                          "reach in speed)",
+                "segments": list(self.segment_cv[2]), "rmse_before": self.segment_cv[0], "rmse_after": self.segment_cv[1],
+                "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "named": t in self.missing_physics}
+                          for t, c in self.held_out.items()}}
         return out
 
     def report(self) -> str:
@@ -459,7 +523,10 @@ class ThermalDiagnosis:
         lines += [f"  not determinable: {d['term']}: {d['reason']}" for d in self.not_determinable]
         lines += [f"final {final.model}: rmse {final.rmse:.4g} K = {self.noise.rmse_ratio:.2f} x noise "
                   f"({self.noise.total_c:.3g} K); held-out rmse {self.cv_rmse[0]:.4g} -> {self.cv_rmse[1]:.4g} K; "
-                  f"{len(self.localisations[1].mismatches)} unexplained intervals", final.fit_report()]
+                  f"{len(self.localisations[1].mismatches)} unexplained intervals"]
+        if self.segment_cv is not None:
+            lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K")
+        lines.append(final.fit_report())
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 3) -> Path:
@@ -496,10 +563,10 @@ class ThermalDiagnosis:
 
 def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) -> tuple[list[str], list[dict]]:
     usable, skipped = [], []
-    moving = any(g.has_velocity and np.any(np.abs(g.velocity) > 0.05) for g in grids)
+    moving = any(g.has_velocity and np.any(np.abs(g.velocity) > MOVING_RAD_S) for g in grids)
     for term in candidates:
         require(term in THERMAL_TERMS, "diagnose", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
-        if term in ("friction_heating", "iron_losses") and not moving:
+        if term in SPEED_TERMS and not moving:
             skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
                             "experiment": EXPERIMENTS[term]})
         else:
@@ -535,6 +602,38 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
                                                 + (f" (collinear with {', '.join(partners)})" if partners else ""),
                         "experiment": EXPERIMENTS[term]})
     return out
+
+
+def _withdrawn(checks: Mapping[str, HeldOutCheck]) -> list[dict]:
+    """Terms the fit of every segment wanted that a held-out segment does not confirm: not claimed."""
+    return [{"term": t, "experiment": EXPERIMENTS[t],
+             "reason": f"lowers the residual of the data it is fitted on, not the error on unseen data (leave one "
+                       f"segment out: {c}): not claimed, and not in the final model"}
+            for t, c in sorted(checks.items()) if not c.improves]
+
+
+def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
+    """At one speed (``ONE_SPEED_SPREAD``) a loss that grows with the speed is a constant: each chosen
+    speed-dependent term is listed, and the drive's constant heat too when the motor never rests
+    (``ALWAYS_MOVING``: then nothing separates a running loss from a heat that is always on)."""
+    speeds = np.abs(np.concatenate([g.velocity for g in grids if g.has_velocity] or [np.zeros(0)]))
+    moving = speeds[speeds > MOVING_RAD_S]
+    if moving.size < 2:
+        return []
+    low, mid, high = np.percentile(moving, [5, 50, 95])
+    always = moving.size >= ALWAYS_MOVING * speeds.size
+    named = [t for t in SPEED_TERMS if t in chosen]
+    named += ["drive_heating"] if always and "drive_heating" in chosen else []
+    if not named or high > ONE_SPEED_SPREAD * low:
+        return []
+    reason = (f"the motor turns at one speed ({mid:.4g} rad/s; 90 % of the moving samples within {low:.4g}-"
+              f"{high:.4g} rad/s, {100 * moving.size / speeds.size:.0f} % of the samples moving): a loss that grows "
+              "with the speed (friction heat c1 |w| + c2 w^2, iron losses k w^2) is a constant here, so how it grows "
+              "cannot be told" + (", nor a running loss from a heat that is always on (a drive's idle loss)"
+                                  if always else "") + "; the named {} is one reading of it")
+    experiment = (f"the same currents at two or more speeds (e.g. {0.4 * mid:.3g} and {mid:.3g} rad/s, each until "
+                  "the temperature settles): a speed-dependent loss changes with the speed, a constant one does not")
+    return [{"term": t, "reason": reason.format(t), "experiment": experiment} for t in named]
 
 
 def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, list[dict]]:
@@ -585,13 +684,21 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     with tqdm(desc="thermal diagnosis fits", unit="fit", disable=hide) as bar:
         fitter = _Fitter(params, grids, settings, specs, bar)
         sets = [frozenset(c) | base for k in range(len(usable) + 1) for c in itertools.combinations(usable, k)]
+        if base:  # the plain one-node fit starts the baseline's (from the file's values alone it can stall far off)
+            fitter.fit(frozenset())
         for terms in sets:
             fitter.fit(terms)
-        selection = subset_select([fitter.subset(t) for t in sets], settings.selection)
-        cv = None
+        several = len(grids) > 1
+        selection, held_out = select_held_out([fitter.subset(t) for t in sets], fitter.held_out if several else None,
+                                              base, settings.selection)
+        cv = segment_cv = None
         if selection is not None:
             fitter.polish(selection.chosen.terms)
             cv = (fitter.cv_rmse(base), fitter.cv_rmse(selection.chosen.terms))
+            judged = [r for r in range(len(grids)) if all(fitter.covered(t, r) for t in selection.chosen.terms)]
+            if several and judged:
+                segment_cv = (fitter.segment_rmse(base, judged), fitter.segment_rmse(selection.chosen.terms, judged),
+                              tuple(grids[r].name for r in judged))
     fits = dict(fitter.fits)
     if selection is None:
         return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
@@ -603,16 +710,20 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     fitting = noise.rmse_ratio <= settings.max_noise_ratio and noise.total_c <= settings.max_noise_c
     message = (f"{final.model}: rmse {final.rmse:.3g} K = {noise.rmse_ratio:.2f} x the residual noise "
                f"{noise.total_c:.3g} K")
+    hosted, unresolved = _hosted(final, grids)
     if noise.rmse_ratio > settings.max_noise_ratio:
-        message += f" (> {settings.max_noise_ratio:g}): no candidate explains these recordings"
+        message += f" (> {settings.max_noise_ratio:g}): a systematic error that no candidate explains"
+        if selection.chosen.terms - base - hosted:
+            message += (f"; the terms named lower the held-out RMSE from {cv[0]:.3g} to {cv[1]:.3g} K, what is left "
+                        "needs physics beyond the candidates (more thermal nodes, another heat source)")
     elif not fitting:
         message += (f", above {settings.max_noise_c:g} K: the temperature jumps between samples as no thermal "
                     "network does (a wrong column or a broken sensor?); nothing here can be diagnosed")
-    hosted, unresolved = _hosted(final, grids)
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
-                            tuple(skipped) + tuple(unresolved) + tuple(_undetermined(selection, fits)),
-                            settings.cv_blocks, hosted, base)
+                            tuple(skipped) + tuple(unresolved) + tuple(_withdrawn(held_out))
+                            + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)),
+                            settings.cv_blocks, hosted, base, held_out, segment_cv)
 
 
 def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,

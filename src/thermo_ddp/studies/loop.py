@@ -40,7 +40,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require, settings_from_mapping
-from ..errors import RunFailed
+from ..errors import InputError, RunFailed
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
@@ -55,6 +55,7 @@ from .testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, Simulat
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
 from .._figures import new_figure
 from ..outputs import check_output_folder, write_folder_atomically
+from ..recordings import ColumnMap, load_column_map, read_recordings
 
 log = logging.getLogger(__name__)
 _SRC = "loop"
@@ -429,9 +430,10 @@ def plot_summary(result: LoopResult, path: Path) -> Path:
 
 def identify_models(recording_files, out_dir: Path,
                     settings: LoopSettings) -> tuple[ThermalDiagnosis, ThermalFit, dict[str, Path]]:
-    """Diagnose the recordings; re-identify the diagnosed structure on every sample (:func:`refit`);
-    write the ORIGINAL (identified one-node baseline, constant ambient, no friction heat) and IMPROVED
-    (the re-identified diagnosed structure) parameter files into ``out_dir``."""
+    """Diagnose the recordings (contract CSV files, or recordings read through a column map); re-identify
+    the diagnosed structure on every sample (:func:`refit`); write the ORIGINAL (identified one-node baseline,
+    constant ambient, no friction heat) and IMPROVED (the re-identified diagnosed structure) parameter files
+    into ``out_dir``."""
     diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
     if not diagnosis.success:
         raise RunFailed("the loop's diagnosis", diagnosis.status, diagnosis.message)
@@ -459,9 +461,30 @@ def refit(diagnosis: ThermalDiagnosis, recording_files) -> ThermalFit:
     return fit
 
 
-def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = None, **options) -> LoopResult:
+def logged_columns(settings: LoopSettings) -> tuple[str, ...]:
+    """The robot's logged columns: the report's, and the motor voltage with ``settings.voltage``."""
+    return LOGGED_COLUMNS if settings.voltage else COLUMNS
+
+
+def loop_column_map(columns: ColumnMap | str | Path | None, settings: LoopSettings) -> ColumnMap | None:
+    """The column map the robot logs by (``--columns``), checked before any work: writable from the robot's
+    columns (:meth:`~thermo_ddp.recordings.ColumnMap.check_writable`) and holding what the diagnosis reads."""
+    cmap = load_column_map(columns) if isinstance(columns, (str, Path)) else columns
+    if cmap is None:
+        return None
+    cmap.check_writable(logged_columns(settings))
+    for needed in ("current_a", "temperature_c"):
+        if needed not in cmap.columns:
+            raise InputError(cmap.source, f"columns.{needed}", "missing", "the loop's diagnosis reads it: map it")
+    return cmap
+
+
+def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = None,
+             columns: ColumnMap | str | Path | None = None, **options) -> LoopResult:
     """The whole chain (see the module docstring); recordings and parameter files go into ``out_dir``
-    (a temporary directory when None). Options: the fields of :class:`LoopSettings`."""
+    (a temporary directory when None). ``columns``: a column map (or its TOML file): the robot logs its
+    recordings in that map's own column names, and the chain reads them through it, as it would a real
+    robot's logs. Options: the fields of :class:`LoopSettings`."""
     if settings is None:
         settings = settings_from_mapping(LoopSettings, options, _SRC)
     elif options:
@@ -469,15 +492,17 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     if out_dir is None:
         out_dir = Path(tempfile.mkdtemp(prefix="thermo-ddp-loop-"))
     out_dir = Path(out_dir)
+    cmap = loop_column_map(columns, settings)
     elbow = load_model((ELBOW,))  # a limit the resting winding already exceeds is refused before the experiments
     for lim in settings.limits_c:
         check_idle_below_limits(elbow, {ELBOW: lim})
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
     recordings = record_experiments(robot, settings)
-    columns = LOGGED_COLUMNS if settings.voltage else COLUMNS
-    files = tuple(r.to_csv(out_dir / "recordings" / f"{r.name}.csv", columns) for r in recordings)
-    diagnosis, improved_fit, model_files = identify_models(files, out_dir / "models", settings)
+    files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
+                  for r in recordings)
+    sources = files if cmap is None else read_recordings(files, cmap).recordings
+    diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
     save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
     plant_model = truth_model(robot, settings.payload_kg)
     executions = []
@@ -494,7 +519,15 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
 
 
-def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[str, Any]:
+def _log(recording: SimulatedRecording, path: Path, logged: tuple[str, ...], cmap: ColumnMap | None) -> Path:
+    """The robot's log of ``recording``: the contract CSV, or the CSV ``cmap`` reads."""
+    if cmap is None:
+        return recording.to_csv(path, logged)
+    return cmap.write_csv(path, recording.columns)
+
+
+def loop_files(out_dir: str | Path, *, short: bool = False, columns: str | Path | None = None,
+               **options) -> dict[str, Any]:
     """CLI entry (``thermo-ddp loop``): run the chain, write into ``out_dir`` the recordings
     (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth),
     the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png), the table (loop.json)
@@ -504,13 +537,17 @@ def loop_files(out_dir: str | Path, *, short: bool = False, **options) -> dict[s
     :func:`thermo_ddp.outputs.check_output_folder`); the run is built in a fresh folder beside it that
     replaces it only when complete, so a failed run leaves an earlier one as it was."""
     settings = LoopSettings.short(**options) if short else settings_from_mapping(LoopSettings, options, _SRC)
+    cmap = loop_column_map(columns, settings)
     out_dir = check_output_folder("--out", out_dir)
-    return write_folder_atomically(out_dir, lambda folder: _write_loop(settings, folder, out_dir))
+    if columns is not None and out_dir.resolve() in Path(columns).resolve().parents:
+        raise InputError("--columns", "--columns", str(columns), f"inside the output folder {out_dir}, which the "
+                         "run replaces: keep the map elsewhere")
+    return write_folder_atomically(out_dir, lambda folder: _write_loop(settings, folder, out_dir, cmap))
 
 
-def _write_loop(settings: LoopSettings, folder: Path, final: Path) -> dict[str, Any]:
+def _write_loop(settings: LoopSettings, folder: Path, final: Path, cmap: ColumnMap | None) -> dict[str, Any]:
     """The run's files into ``folder``; paths in the table name ``final``, where the folder will be."""
-    result = run_loop(settings, folder)
+    result = run_loop(settings, folder, cmap)
     (folder / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
     result.diagnosis.plot(folder / "diagnosis.png")
     result.plot(folder / "loop.png")
@@ -525,6 +562,6 @@ def _write_loop(settings: LoopSettings, folder: Path, final: Path) -> dict[str, 
     return table
 
 
-__all__ = ["Execution", "LoopResult", "LoopSettings", "claim", "execute",
-           "identify_models", "loop_files", "record_experiments", "refit", "robot_parameters", "run_loop", "truth_model",
+__all__ = ["Execution", "LoopResult", "LoopSettings", "claim", "execute", "identify_models", "logged_columns",
+           "loop_column_map", "loop_files", "record_experiments", "refit", "robot_parameters", "run_loop", "truth_model",
            "truth_network", "truth_parameters"]
