@@ -85,6 +85,10 @@ COMPILED = ("local", "local_eval", "back_core", "grad_core", "terminal", "fwd", 
 MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
+# A full-DDP model whose second-order term is at most this big also gets the whole Riccati step as one
+# function (ddp_back_fused, shared subexpressions): its backward pass computes the dynamics' sweep once
+# instead of in both the local model and the second-order term (the 1-joint lift: 11,000 instructions).
+FUSED_MAX_INSTRUCTIONS = 100_000
 
 
 def _function(name, inputs, outputs, names_in, names_out, cse=True):
@@ -146,8 +150,9 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
     back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
                      ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
-    composed = None if compiled else ca.Function(
-        "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
+    fuse = len(chunks) == 1 and chunks[0][0].n_instructions() <= FUSED_MAX_INSTRUCTIONS
+    composed = None if compiled and not fuse else ca.Function(
+        "ddp_back_fused" if compiled else "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
@@ -336,8 +341,10 @@ def compiled_library(problem, settings, layout):
     if library is not None:
         return library
     knots = knot_functions(problem, settings, layout, compiled=True)
-    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"]}
-    sources = {_pass_cache.DRIVER: _pass_cache.driver_source(), "ddp_hess_table.c": _hessian_table(knots["hess"])}
+    fused = [knots["back"]] if knots["back"] is not None else []
+    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"] + fused}
+    sources = {_pass_cache.DRIVER: _pass_cache.driver_source(),
+               "ddp_hess_table.c": _hessian_table(knots["hess"], knots["back"])}
     try:
         path = codegen.compile_library(functions, settings.compiler_flags, sources)
     except (RuntimeError, subprocess.CalledProcessError) as err:
@@ -346,8 +353,9 @@ def compiled_library(problem, settings, layout):
     return _pass_cache.record(key, path)
 
 
-def _hessian_table(chunks) -> str:
-    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton)."""
+def _hessian_table(chunks, fused) -> str:
+    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton) and the
+    fused Riccati step (NULL when ``fused`` is None)."""
     sig = "(const double **, double **, long long *, double *, int)"
     wsig = "(long long *, long long *, long long *, long long *)"
     names = [f.name() for f in chunks]
@@ -357,7 +365,10 @@ def _hessian_table(chunks) -> str:
         f"const int ddp_n_hess = {len(names)};",
         f"int (*const ddp_hess[]){sig} = {listed(names)};",
         f"int (*const ddp_hess_work[]){wsig} = {listed(n + '_work' for n in names)};",
-        f"const int ddp_hess_size[] = {listed(str(f.nnz_out(0)) for f in chunks)};", ""])
+        f"const int ddp_hess_size[] = {listed(str(f.nnz_out(0)) for f in chunks)};",
+        *([f"int ddp_back_fused{sig};\nint ddp_back_fused_work{wsig};"] if fused is not None else []),
+        f"int (*const ddp_fused_step){sig} = {'ddp_back_fused' if fused is not None else '0'};",
+        f"int (*const ddp_fused_step_work){wsig} = {'ddp_back_fused_work' if fused is not None else '0'};", ""])
 
 
 class CompiledBackend:

@@ -38,6 +38,11 @@ extern const int ddp_n_hess;
 extern const knot_fn ddp_hess[];
 extern const work_fn ddp_hess_work[];
 extern const int ddp_hess_size[];
+/* A small full-DDP model may also have the whole Riccati step as one function with shared subexpressions,
+ * ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy): the backward pass then calls it alone
+ * (the local model and the second-order term share the dynamics' sweep). NULL when not generated. */
+extern const knot_fn ddp_fused_step;
+extern const work_fn ddp_fused_step_work;
 
 /* Work space of one solver: the knot functions' argument/result pointers and work arrays (sized by
  * their *_work functions), the problem's sizes and a terminal value vector. */
@@ -83,6 +88,7 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
+    if (ddp_fused_step_work) grow(ddp_fused_step_work, &n_arg, &n_res, &n_iw, &n_w);
     for (int k = 0; k < ddp_n_hess; ++k) {
         grow(ddp_hess_work[k], &n_arg, &n_res, &n_iw, &n_w);
         n_hess += ddp_hess_size[k];
@@ -161,6 +167,16 @@ static int back_knot(Work *W, int t, const double *X, const double *U, const dou
     return ddp_back_knot(W->arg, W->res, W->iw, W->w, 0);
 }
 
+/* The Riccati step at knot t by ddp_fused_step (its local model computed inside). */
+static int fused_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
+                      const double *c, const double *rho, const double *reg, double *policy, double *values) {
+    W->arg[0] = values + (size_t)(t + 1) * W->n_value;
+    W->arg[1] = X + (size_t)t * W->nx, W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np;
+    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = c, W->arg[6] = rho, W->arg[7] = reg;
+    W->res[0] = values + (size_t)t * W->n_value, W->res[1] = policy + (size_t)t * W->n_policy;
+    return ddp_fused_step(W->arg, W->res, W->iw, W->w, 0);
+}
+
 /* summary = [sum d1, sum d2, max stationarity, min pivot] over the policy rows. */
 static void summarise(const Work *W, int N, const double *policy, double *summary) {
     const int o = W->nu + W->nu * W->nx;
@@ -198,10 +214,14 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
             J += cost;
             continue;
         }
-        rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
-                   : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
-        J += cost;
-        if (!rc) rc = back_knot(W, t, X, U, P, (C_out ? C_out : C) + (size_t)t * W->nx, &reg, policy, values);
+        if (!C_out && ddp_fused_step) {
+            rc = fused_knot(W, t, X, U, P, Lam, C + (size_t)t * W->nx, &rho, &reg, policy, values);
+        } else {
+            rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
+                       : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+            J += cost;
+            if (!rc) rc = back_knot(W, t, X, U, P, (C_out ? C_out : C) + (size_t)t * W->nx, &reg, policy, values);
+        }
         if (!rc && !(policy[(size_t)t * W->n_policy + pivot] > 0.0)) {
             mark_failed(W, t, policy, values);
             failed = 1;
