@@ -1,7 +1,7 @@
 """One warm MPC step of the elbow + thermal lift, N = 200 (dt = 0.1 s): DDP vs IPOPT (and fatrop).
 
 The solver-level step only (no controller loop logic from thermo_ddp.mpc): the lift of
-bench_lift_ocp (40 kg, 20 s scenario) under 140 °C (limit inactive) and 94 °C (limit active in
+bench_lift_ocp (40 kg, 20 s scenario; careful motion as the controller's default, off) under 140 °C (limit inactive) and 94 °C (limit active in
 every prediction: it binds near the end of the hold, inside the 200-knot horizon). Closed loop
 over ``--steps`` steps from the start: the plant is the model's own step with DDP's first current,
 then a velocity disturbance (1e-2 rad/s, seeded; on v only, so the measured angle is the one
@@ -37,7 +37,7 @@ VELOCITY_DISTURBANCE = 1e-2  # rad/s, standard deviation
 
 
 def mpc_loop(limit_c: float, steps: int, repeats: int) -> dict:
-    lp = lift_problem(KNOTS, limit_c)
+    lp = lift_problem(KNOTS, limit_c, careful_motion=MPCSettings().controller.careful_motion)  # the controller's
     solvers = {name: make_solver(lp, name) for name in SOLVERS}
     solvers["ddp"] = make_solver(lp, "ddp", mpc_ddp_settings(MPCSettings().controller.max_iterations))  # the controller's
     first = {name: s.solve(lp.x0, lp.params, initial_guess(lp)) for name, s in solvers.items()}
