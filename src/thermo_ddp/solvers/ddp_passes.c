@@ -39,8 +39,9 @@ extern const knot_fn ddp_hess[];
 extern const work_fn ddp_hess_work[];
 extern const int ddp_hess_size[];
 /* A small full-DDP model may also have the whole Riccati step as one function with shared subexpressions,
- * ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy): the backward pass then calls it alone
- * (the local model and the second-order term share the dynamics' sweep). NULL when not generated. */
+ * ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy): the backward passes then call it alone
+ * (the first pass after the knot's evaluation, for its gap); the local model and the second-order term
+ * share the dynamics' sweep there. NULL when not generated. */
 extern const knot_fn ddp_fused_step;
 extern const work_fn ddp_fused_step_work;
 
@@ -214,8 +215,10 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
             J += cost;
             continue;
         }
-        if (!C_out && ddp_fused_step) {
-            rc = fused_knot(W, t, X, U, P, Lam, C + (size_t)t * W->nx, &rho, &reg, policy, values);
+        if (ddp_fused_step) { /* the first pass: the knot's evaluation first, for its gap */
+            if (C_out) rc = eval_knot(W, t, X, U, P, &cost, G, C_out), J += cost;
+            if (!rc) rc = fused_knot(W, t, X, U, P, Lam, (C_out ? C_out : C) + (size_t)t * W->nx, &rho, &reg,
+                                     policy, values);
         } else {
             rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
                        : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
