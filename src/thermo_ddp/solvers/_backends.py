@@ -77,7 +77,32 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     knots["grad_core"], knots["grad"] = _gradient_knot(problem, layout, knots, model_in, compiled)
     knots["fwd"] = _forward_knot(problem, layout, x, p)
     knots["eval"], knots["end"] = _evaluation_knots(problem, x, u, p)
+    small = len(knots["hess"]) == 1 and knots["hess"][0].n_instructions() <= FUSED_MAX_INSTRUCTIONS
+    knots["fused"] = _fused_knots(problem, settings, layout, knots) if compiled and small else []
     return knots
+
+
+def _fused_knots(problem, settings, layout, knots):
+    """A small full-DDP model's Riccati step as one function with shared subexpressions, from the local model
+    and the dynamics tensor contracted symbolically (knot_model's second_order_sym), and the same after the
+    knot's evaluation (the first pass): ``ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy)``,
+    ``ddp_fused_eval_step(S, x, u, p, lam, x_next, rho, reg) -> (S_prev, policy, cost, g, gap)``."""
+    sym, nx = problem.functions.symbolic, problem.nx
+    x, u, p, lam, _, rho = knots["syms"]
+    reg, c, S, xn = sym.sym("reg"), sym.sym("c", nx), sym.sym("S", layout.n_value), sym.sym("x_next", nx)
+    v_sym, hxx, huu, hux = knots["second"]
+    model = {**knots["model"], "second_order": lambda v: tuple(ca.substitute(h, v_sym, v) for h in (hxx, huu, hux))}
+    st = backward_step(SymOps, model, S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx), c, u,
+                       ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg, settings.box_iterations, problem.has_box)
+    out = [ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"])),
+           ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])]
+    step = _function("ddp_fused_step", [S, x, u, p, lam, c, rho, reg], out,
+                     ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"])
+    cost, g, gap = knots["eval"](x, u, p, xn)
+    eval_step = _function("ddp_fused_eval_step", [S, x, u, p, lam, xn, rho, reg], [*step(S, x, u, p, lam, gap, rho, reg),
+                          cost, g, gap], ["S", "x", "u", "p", "lam", "x_next", "rho", "reg"],
+                          ["S_prev", "policy", "cost", "g", "gap"])
+    return [step, eval_step]
 
 
 # The knots the C driver calls (and "hess"): the local model once per knot, then the Riccati or first-order step.
@@ -86,9 +111,11 @@ MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this orde
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
 # A full-DDP model whose second-order term is at most this big also gets the whole Riccati step as one
-# function (ddp_back_fused, shared subexpressions): its backward pass computes the dynamics' sweep once
-# instead of in both the local model and the second-order term (the 1-joint lift: 11,000 instructions).
+# function (shared subexpressions; see _fused_knots): the dynamics' sweep is computed once instead of in both
+# the local model and the second-order term (MPC lift, N = 200: first pass 612 -> ~445 us, as before the
+# per-knot split). The 7-joint arm's term (1.1e6 instructions) is far above it.
 FUSED_MAX_INSTRUCTIONS = 100_000
+FUSED = ("ddp_fused_step", "ddp_fused_eval_step")
 
 
 def _function(name, inputs, outputs, names_in, names_out, cse=True):
@@ -150,9 +177,8 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
     back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
                      ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
-    fuse = len(chunks) == 1 and chunks[0][0].n_instructions() <= FUSED_MAX_INSTRUCTIONS
-    composed = None if compiled and not fuse else ca.Function(
-        "ddp_back_fused" if compiled else "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
+    composed = None if compiled else ca.Function(
+        "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
@@ -341,10 +367,9 @@ def compiled_library(problem, settings, layout):
     if library is not None:
         return library
     knots = knot_functions(problem, settings, layout, compiled=True)
-    fused = [knots["back"]] if knots["back"] is not None else []
-    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"] + fused}
+    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"] + knots["fused"]}
     sources = {_pass_cache.DRIVER: _pass_cache.driver_source(),
-               "ddp_hess_table.c": _hessian_table(knots["hess"], knots["back"])}
+               "ddp_hess_table.c": _hessian_table(knots["hess"], knots["fused"])}
     try:
         path = codegen.compile_library(functions, settings.compiler_flags, sources)
     except (RuntimeError, subprocess.CalledProcessError) as err:
@@ -354,11 +379,11 @@ def compiled_library(problem, settings, layout):
 
 
 def _hessian_table(chunks, fused) -> str:
-    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton) and the
-    fused Riccati step (NULL when ``fused`` is None)."""
+    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton) and of the
+    fused Riccati steps (NULL when ``fused`` is empty)."""
     sig = "(const double **, double **, long long *, double *, int)"
     wsig = "(long long *, long long *, long long *, long long *)"
-    names = [f.name() for f in chunks]
+    names, fused_names = [f.name() for f in chunks], [f.name() for f in fused]
     lines = [f"int {n}{sig};\nint {n}_work{wsig};" for n in names]
     listed = lambda items: "{" + (", ".join(items) or "0") + "}"  # noqa: E731
     return "\n".join(lines + [
@@ -366,9 +391,9 @@ def _hessian_table(chunks, fused) -> str:
         f"int (*const ddp_hess[]){sig} = {listed(names)};",
         f"int (*const ddp_hess_work[]){wsig} = {listed(n + '_work' for n in names)};",
         f"const int ddp_hess_size[] = {listed(str(f.nnz_out(0)) for f in chunks)};",
-        *([f"int ddp_back_fused{sig};\nint ddp_back_fused_work{wsig};"] if fused is not None else []),
-        f"int (*const ddp_fused_step){sig} = {'ddp_back_fused' if fused is not None else '0'};",
-        f"int (*const ddp_fused_step_work){wsig} = {'ddp_back_fused_work' if fused is not None else '0'};", ""])
+        *[f"int {n}{sig};\nint {n}_work{wsig};" for n in fused_names],
+        *[f"int (*const {n}_fn){sig} = {n if fused else '0'};\nint (*const {n}_work_fn){wsig} = "
+          f"{n + '_work' if fused else '0'};" for n in FUSED], ""])
 
 
 class CompiledBackend:

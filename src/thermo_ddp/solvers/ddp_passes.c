@@ -38,12 +38,12 @@ extern const int ddp_n_hess;
 extern const knot_fn ddp_hess[];
 extern const work_fn ddp_hess_work[];
 extern const int ddp_hess_size[];
-/* A small full-DDP model may also have the whole Riccati step as one function with shared subexpressions,
- * ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy): the backward passes then call it alone
- * (the first pass after the knot's evaluation, for its gap); the local model and the second-order term
- * share the dynamics' sweep there. NULL when not generated. */
-extern const knot_fn ddp_fused_step;
-extern const work_fn ddp_fused_step_work;
+/* A small full-DDP model also has the whole Riccati step as one function with shared subexpressions,
+ * ddp_fused_step(S, x, u, p, lam, c, rho, reg) -> (S_prev, policy), and the same after the knot's
+ * evaluation, ddp_fused_eval_step(S, x, u, p, lam, x_next, rho, reg) -> (S_prev, policy, cost, g, gap):
+ * the backward passes then call these alone. NULL (the _fn pointers) when not generated. */
+extern const knot_fn ddp_fused_step_fn, ddp_fused_eval_step_fn;
+extern const work_fn ddp_fused_step_work_fn, ddp_fused_eval_step_work_fn;
 
 /* Work space of one solver: the knot functions' argument/result pointers and work arrays (sized by
  * their *_work functions), the problem's sizes and a terminal value vector. */
@@ -89,7 +89,10 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
-    if (ddp_fused_step_work) grow(ddp_fused_step_work, &n_arg, &n_res, &n_iw, &n_w);
+    if (ddp_fused_step_fn) {
+        grow(ddp_fused_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
+        grow(ddp_fused_eval_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
+    }
     for (int k = 0; k < ddp_n_hess; ++k) {
         grow(ddp_hess_work[k], &n_arg, &n_res, &n_iw, &n_w);
         n_hess += ddp_hess_size[k];
@@ -168,14 +171,19 @@ static int back_knot(Work *W, int t, const double *X, const double *U, const dou
     return ddp_back_knot(W->arg, W->res, W->iw, W->w, 0);
 }
 
-/* The Riccati step at knot t by ddp_fused_step (its local model computed inside). */
+/* The Riccati step at knot t by the fused functions: with the gap c, or (C_out) after the knot's evaluation
+ * (cost, G and C_out rows written). */
 static int fused_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
-                      const double *c, const double *rho, const double *reg, double *policy, double *values) {
+                      const double *c, const double *rho, const double *reg, double *policy, double *values,
+                      double *cost, double *G, double *C_out) {
     W->arg[0] = values + (size_t)(t + 1) * W->n_value;
     W->arg[1] = X + (size_t)t * W->nx, W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np;
-    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = c, W->arg[6] = rho, W->arg[7] = reg;
+    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = C_out ? X + (size_t)(t + 1) * W->nx : c;
+    W->arg[6] = rho, W->arg[7] = reg;
     W->res[0] = values + (size_t)t * W->n_value, W->res[1] = policy + (size_t)t * W->n_policy;
-    return ddp_fused_step(W->arg, W->res, W->iw, W->w, 0);
+    if (!C_out) return ddp_fused_step_fn(W->arg, W->res, W->iw, W->w, 0);
+    W->res[2] = cost, W->res[3] = G + (size_t)t * W->ng, W->res[4] = C_out + (size_t)t * W->nx;
+    return ddp_fused_eval_step_fn(W->arg, W->res, W->iw, W->w, 0);
 }
 
 /* summary = [sum d1, sum d2, max stationarity, min pivot] over the policy rows. */
@@ -215,10 +223,10 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
             J += cost;
             continue;
         }
-        if (ddp_fused_step) { /* the first pass: the knot's evaluation first, for its gap */
-            if (C_out) rc = eval_knot(W, t, X, U, P, &cost, G, C_out), J += cost;
-            if (!rc) rc = fused_knot(W, t, X, U, P, Lam, (C_out ? C_out : C) + (size_t)t * W->nx, &rho, &reg,
-                                     policy, values);
+        if (ddp_fused_step_fn) {
+            rc = fused_knot(W, t, X, U, P, Lam, C_out ? NULL : C + (size_t)t * W->nx, &rho, &reg, policy, values,
+                            &cost, G, C_out);
+            J += cost;
         } else {
             rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
                        : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
