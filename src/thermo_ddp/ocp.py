@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import logging
 from typing import Sequence
 
@@ -382,11 +383,28 @@ class OptimalControlProblem:
 
     def with_horizon(self, horizon: int) -> "OptimalControlProblem":
         """The same problem over ``horizon`` knots, sharing the built :attr:`functions` (they do not depend
-        on the horizon)."""
+        on the horizon) and :attr:`structure_digest`."""
         other = dataclasses.replace(self, horizon=horizon)
+        other.__dict__["structure_digest"] = self.structure_digest
         if "functions" in self.__dict__:
             other.__dict__["functions"] = self.functions
         return other
+
+    @functools.cached_property
+    def structure_digest(self) -> str | None:
+        """Hash of everything but the horizon: the functions (serialised), the cost weights and the control
+        box; None when a function cannot be serialised."""
+        digest = hashlib.sha256(self.u_lb.tobytes() + self.u_ub.tobytes())
+        funs = [self.dynamics, self.dynamics_jacobians] + [c.residual for c in self.costs + self.terminal_costs]
+        funs += [c.function for c in self.constraints + self.terminal_constraints]
+        try:
+            for f in funs:
+                digest.update(b"-" if f is None else f.serialize().encode())
+        except RuntimeError:
+            return None
+        for c in self.costs + self.terminal_costs:
+            digest.update(c.weight.tobytes())
+        return digest.hexdigest()
 
     # -- symbolic building blocks (cached) --------------------------------------------------
     @functools.cached_property

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping
 
@@ -56,9 +56,6 @@ class ActuatedArm:
     arm: Arm
     params: Mapping[str, JointParameters]
     networks: Mapping[str, ThermalNetwork]
-    ode: ca.Function = field(repr=False)
-    ode_jacobians: ca.Function = field(repr=False)
-    outputs: ca.Function = field(repr=False)
 
     @classmethod
     def from_parameters(cls, arm_settings: ArmSettings, params: Mapping[str, JointParameters],
@@ -73,7 +70,30 @@ class ActuatedArm:
         arm = build_arm(arm_settings, {j: params[j].motor.armature_kg_m2 for j in arm_settings.joints})
         params = {j: params[j] for j in arm.joints}
         networks = {j: (networks or {}).get(j) or network_from_parameters(p.thermal) for j, p in params.items()}
-        return cls(arm, params, networks, *_build_functions(arm, params, networks))
+        return cls(arm, params, networks)
+
+    # --- functions at this model's payload (built on first use: a planner with the payload as a runtime
+    # parameter uses only :attr:`runtime_payload_functions`, shared by every payload) ------------------
+    @functools.cached_property
+    def _functions(self) -> tuple[ca.Function, ca.Function, ca.Function]:
+        return _build_functions(self.arm, self.params, self.networks)
+
+    @property
+    def ode(self) -> ca.Function:
+        """``arm_ode(x, current_a, ambient_c) -> xdot``."""
+        return self._functions[0]
+
+    @property
+    def ode_jacobians(self) -> ca.Function:
+        """``arm_ode_jacobians(x, current_a, ambient_c) -> (xdot, dxdot_dx, dxdot_du)`` (analytic
+        rigid-body partials)."""
+        return self._functions[1]
+
+    @property
+    def outputs(self) -> ca.Function:
+        """``arm_outputs(x, current_a, ambient_c) -> voltage_v, joint_torque_nm, joule_w, friction_w,
+        winding_c, sensor_c`` (one entry per joint)."""
+        return self._functions[2]
 
     @functools.cached_property
     def structure_key(self) -> str:
@@ -104,7 +124,7 @@ class ActuatedArm:
 
     @property
     def nx(self) -> int:
-        return self.ode.size1_in(0)
+        return 2 * self.nu + sum(len(self.networks[j].nodes) for j in self.joints)
 
     @property
     def state_names(self) -> tuple[str, ...]:

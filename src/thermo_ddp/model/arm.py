@@ -5,6 +5,7 @@ ourselves; its armature (N^2 B_m) is set here from the motor parameter files, on
 """
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import site
@@ -125,9 +126,15 @@ def _payload_placement(full: pin.Model, lever_m: float) -> tuple[str, np.ndarray
     return ELBOW, point
 
 
+@functools.lru_cache(maxsize=4)
+def _robot_model(urdf_path: str) -> pin.Model:
+    """The parsed URDF (read only: :func:`build_arm` copies it before changing anything)."""
+    return pin.buildModelFromUrdf(urdf_path)
+
+
 def build_arm(settings: ArmSettings = ArmSettings(), armature_kg_m2: Mapping[str, float] | None = None) -> Arm:
     """Load Talos, lock every joint but ``settings.joints``, add the payload and the armature."""
-    full = pin.buildModelFromUrdf(str(robots_dir() / settings.robot))
+    full = _robot_model(str(robots_dir() / settings.robot))
     names = list(full.names[1:])
     for j in settings.posture:
         if j not in names:

@@ -43,22 +43,14 @@ def _sources() -> bytes:
 
 def key(problem, settings) -> str | None:
     """The index key of this problem structure's knot functions (None if a function cannot be serialised)."""
-    digest = hashlib.sha256(_sources())
+    structure = problem.structure_digest
+    if structure is None:
+        return None
     flags = tuple(settings.compiler_flags)
     shape = (settings.full_second_order, settings.box_iterations, flags)  # the settings the code depends on
-    for part in (ca.__version__, repr(shape), problem.u_lb.tobytes().hex(), problem.u_ub.tobytes().hex(),
-                 codegen._host_tag() if any("native" in f for f in flags) else ""):
+    digest = hashlib.sha256(_sources())
+    for part in (ca.__version__, repr(shape), structure, codegen._host_tag() if any("native" in f for f in flags) else ""):
         digest.update(part.encode())
-    funs = [problem.dynamics, problem.dynamics_jacobians]
-    funs += [c.residual for c in problem.costs + problem.terminal_costs]
-    funs += [c.function for c in problem.constraints + problem.terminal_constraints]
-    try:
-        for f in funs:
-            digest.update(b"-" if f is None else f.serialize().encode())
-    except RuntimeError:
-        return None
-    for c in problem.costs + problem.terminal_costs:
-        digest.update(c.weight.tobytes())
     return digest.hexdigest()[:24]
 
 

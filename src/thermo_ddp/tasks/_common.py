@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from .._config import require
+from .._memo import Memo
 from ..model import motor
 from ..model.actuated import ActuatedArm
 from ..model.integrators import rk4
@@ -250,6 +251,7 @@ def solve_work(results) -> dict[str, int]:
 # Thermal-only holds and first crossings
 # --------------------------------------------------------------------------------------------
 _THERMAL_IN = ["temperatures_c", "current_a", "velocity_rad_s", "ambient_c"]
+_HOLD_SIMULATIONS = Memo()  # (structure_key, dt_s, steps) -> the mapped thermal step of hold_temperatures
 
 
 def joint_thermal_rhs(network: ThermalNetwork, motor_params) -> ca.Function:
@@ -287,7 +289,8 @@ def hold_temperatures(model: ActuatedArm, current_a, temperatures_c, duration_s:
                       dt_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Thermal-only simulation of holding still with constant ``current_a``: (time_s, temperatures)."""
     steps = max(1, int(math.ceil(duration_s / dt_s)))
-    f = thermal_step_function(thermal_rhs_function(model), dt_s).mapaccum(steps)
+    f = _HOLD_SIMULATIONS.get((model.structure_key, dt_s, steps),
+                              lambda: thermal_step_function(thermal_rhs_function(model), dt_s).mapaccum(steps))
     temps = np.array(f(np.asarray(temperatures_c, float), np.asarray(current_a, float), np.zeros(model.nu),
                        model.ambient_c)).T
     return np.arange(steps + 1) * dt_s, np.vstack([np.asarray(temperatures_c, float), temps])

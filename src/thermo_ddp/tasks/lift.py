@@ -36,8 +36,9 @@ from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
                       check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
-                      first_crossing, format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
-                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach, winding_limits_c)
+                      format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
+                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach, time_to_limit_by_joint,
+                      winding_limits_c)
 
 log = logging.getLogger(__name__)
 
@@ -285,23 +286,12 @@ def solve(lp: LiftProblem, solver=None, warm_start: WarmStart | None = None) -> 
 
 def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limit_c: float,
                     horizon_s: float = 3600.0, dt_s: float = 0.5) -> float:
-    """Time for the winding to reach ``limit_c`` holding still at ``q_goal`` from ``x_start``.
-
-    Simulated in chunks of growing length (64 s, then 8x longer) that stop once the limit is reached:
-    the same steps as one simulation of the whole horizon."""
-    x = np.array(x_start, dtype=float)
-    x[0], x[1] = q_goal, 0.0
-    current = model.static_current_a([q_goal])
-    done, left, chunk = 0, int(horizon_s / dt_s), int(64.0 / dt_s)
-    while left > 0:
-        n = min(chunk, left)
-        traj = model.simulate(x, np.tile(current, (n, 1)), dt_s, "implicit_euler")
-        w = traj["winding_c"][:, 0]
-        t = first_crossing(traj.time_s, w, limit_c)
-        if math.isfinite(t):
-            return done * dt_s + t
-        x, done, left, chunk = traj.xs[-1], done + n, left - n, 8 * chunk
-    return math.inf
+    """Time for the (one) joint's winding to reach ``limit_c`` holding still at ``q_goal`` from the
+    temperatures of ``x_start`` (inf: not within ``horizon_s``)."""
+    joint = model.joints[0]
+    temperatures = np.asarray(x_start, dtype=float)[2 * model.nu:]
+    return time_to_limit_by_joint(model, model.static_current_a([q_goal]), temperatures, {joint: limit_c},
+                                  horizon_s, dt_s)[joint]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -428,7 +418,9 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     solver = make_solver(lp)
     top = lp.hold_knots[1] - lp.hold_knots[0]
     if settings.find_longest_hold:
-        search = longest_feasible_hold(lp, solver, time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c))
+        # the search's first guess needs the time to limit only up to the requested hold
+        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c, horizon_s=hold_s + settings.dt_s)
+        search = longest_feasible_hold(lp, solver, estimate)
         (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
         every = [r for _, r in search.probes.values()]
     else:
