@@ -246,3 +246,21 @@ def test_every_number_of_a_request_is_a_runtime_parameter(careful):
     x, u = b.model.state(q=[-0.8], v=[0.4]), np.array([3.0])
     assert np.abs(np.array(b.problem.dynamics(x, u, b.params[5])).ravel()
                   - np.array(own(x, u, b.model.ambient_c)).ravel()).max() < 1e-12
+
+
+def test_time_to_limit_is_the_whole_model_held_still():
+    """The lift's time to limit (thermal-only RK4 hold) against the whole model held at the goal by its
+    static current, integrated by implicit Euler at a 10x finer step (mechanics included)."""
+    from thermo_ddp.model.actuated import load_model
+    from thermo_ddp.tasks._common import first_crossing
+    from thermo_ddp.tasks.lift import time_to_limit_s
+    model = load_model(payload_kg=40.0)
+    goal = -np.pi / 2
+    x = model.state(q=[goal])
+    n = int(60.0 / 0.05)
+    traj = model.simulate(x, np.tile(model.static_current_a([goal]), (n, 1)), 0.05, "implicit_euler")
+    assert np.abs(traj["q_rad"][:, 0] - goal).max() < 1e-6  # held still: only the thermal network moves
+    for limit_c in (84.0, 100.0):
+        whole = first_crossing(traj.time_s, traj["winding_c"][:, 0], limit_c)
+        assert np.isfinite(whole) and time_to_limit_s(model, x, goal, limit_c) == pytest.approx(whole, rel=0.01)
+    assert time_to_limit_s(model, x, goal, 100.0, horizon_s=10.0) == np.inf  # not within the horizon

@@ -48,8 +48,9 @@ def key(problem, settings) -> str | None:
         return None
     flags = tuple(settings.compiler_flags)
     shape = (settings.full_second_order, settings.box_iterations, flags)  # the settings the code depends on
+    host = codegen._host_tag() if any("native" in f for f in flags) else ""
     digest = hashlib.sha256(_sources())
-    for part in (ca.__version__, repr(shape), structure, codegen._host_tag() if any("native" in f for f in flags) else ""):
+    for part in (ca.__version__, repr(shape), structure, host):
         digest.update(part.encode())
     return digest.hexdigest()[:24]
 

@@ -37,8 +37,8 @@ from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverR
 from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
                       check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
                       format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
-                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach, time_to_limit_by_joint,
-                      winding_limits_c)
+                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach,
+                      time_to_limit_by_joint, winding_limits_c)
 
 log = logging.getLogger(__name__)
 
@@ -419,7 +419,8 @@ def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: fl
     top = lp.hold_knots[1] - lp.hold_knots[0]
     if settings.find_longest_hold:
         # the search's first guess needs the time to limit only up to the requested hold
-        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c, horizon_s=hold_s + settings.dt_s)
+        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c,
+                                   horizon_s=settings.hold_s + settings.dt_s)
         search = longest_feasible_hold(lp, solver, estimate)
         (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
         every = [r for _, r in search.probes.values()]
