@@ -7,7 +7,8 @@ import pytest
 from thermo_ddp.model.actuated import model_from_dict
 from thermo_ddp.cli import main
 from thermo_ddp.errors import InputError
-from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, build_lift_problem, plan_lift, solve
+from thermo_ddp.tasks.lift import (LIFT_PARAMETERS, LiftSettings, binding_constraints, build_lift_problem, plan_lift,
+                                   solve)
 
 PLAN_KEYS = {"feasible", "status", "message", "payload_kg", "limit_c", "hold_s", "achieved_hold_s", "joints",
              "time_s", "q_rad", "v_rad_s", "current_a", "voltage_v", "winding_c", "casing_c", "drive_c", "model",
@@ -77,6 +78,9 @@ def test_unknown_option_and_bad_value_raise():
         plan_lift(40.0, 84.0, 5.0, horizon=3)
     with pytest.raises(InputError, match="solver"):
         plan_lift(40.0, 84.0, 5.0, solver="snopt")
+    for bad in (0.0, -2.0, float("nan")):
+        with pytest.raises(InputError, match="acceleration_limit_rad_s2"):
+            plan_lift(40.0, 84.0, 5.0, acceleration_limit_rad_s2=bad)
 
 
 def test_cli_plan_writes_json_and_four_panel_plot(tmp_path, capsys):
@@ -177,6 +181,10 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     near = (q < lo + 0.1) | (q > hi - 0.1)
     assert near.any() and np.abs(v[near]).max() <= 0.3
     assert abs(v[-1]) <= 0.01 and np.all((q >= lo) & (q <= hi))
+    from thermo_ddp.tasks.lift import reference_acceleration_limit
+    amax = reference_acceleration_limit(plan.settings)  # twice the min-jerk reference's peak over 2 s
+    assert plan.settings.acceleration_limit_rad_s2 == amax and 4.0 < amax < 5.0
+    assert np.abs(np.diff(v) / plan.settings.dt_s).max() <= amax * (1 + 1e-4)  # on the simulated motion
     m = MotionQuality.of(plan.time_s, q, v, lo, hi)
     assert m.reversals == plan.motion.reversals == 1 and m.inside_range and plan.motion.inside_range
     assert plan.motion.max_speed_near_stop_rad_s == pytest.approx(m.max_speed_near_stop_rad_s, abs=1e-6)
@@ -239,7 +247,8 @@ def test_every_number_of_a_request_is_a_runtime_parameter(careful):
     other = {name: value * 0.9 for name, value in numbers.items()}  # every other number of the request changed
     a = build_lift_problem(first)
     b = build_lift_problem(LiftSettings(payload_kg=25.0, limit_c=120.0, careful_motion=careful,
-                                        velocity_limit_rad_s=2.0, **other))
+                                        velocity_limit_rad_s=2.0, acceleration_limit_rad_s2=3.0, **other))
+    assert b.params[5, LIFT_PARAMETERS.slice("acceleration_limit_rad_s2")] == 3.0
     assert a.problem.horizon != b.problem.horizon
     assert _structure(a.problem) == _structure(b.problem)
     own = load_model(payload_kg=25.0).step(b.settings.dt_s, b.settings.integrator)

@@ -10,6 +10,7 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
   ``return_band`` (back down at the end); the current box |i| <= peak;
 - with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
   ``acceleration`` (smooth phases: the joint acceleration of the model's ODE) and the constraints
+  ``acceleration_limit`` (the mean acceleration over each step, default twice the reference's peak),
   ``stop_approach`` (the speed near a joint stop shrinks with the distance to it), ``one_way`` (the lift moves
   only toward the goal, the hold is still, the lowering only toward the start: up, hold, down and no other
   reversal) and ``terminal_rest``.
@@ -47,8 +48,8 @@ log = logging.getLogger(__name__)
 # the lowering's), 0 while holding; then every number of the request (payload, limit, angles, weights, motion
 # bounds), constant over the knots. Only the model's structure, the time step and the integrator are compiled.
 _REQUEST = ("payload_kg", "limit_c", "goal_rad", "start_rad", "hold_tolerance_rad", "velocity_limit_rad_s",
-            "energy_weight", "velocity_weight", "acceleration_weight", "stop_speed_rad_s", "stop_slope_per_s",
-            "one_way_tolerance_rad_s")
+            "energy_weight", "velocity_weight", "acceleration_weight", "acceleration_limit_rad_s2", "stop_speed_rad_s",
+            "stop_slope_per_s", "one_way_tolerance_rad_s")
 LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
                                   ("direction", 1), *((name, 1) for name in _REQUEST)))
 
@@ -79,6 +80,7 @@ SETTING_BOUNDS = {
     "stop_slope_per_s": Bound(0.0, 1e3, "1/s", "how fast the speed allowed grows away from a stop"),
     "one_way_tolerance_rad_s": Bound(1e-6, 1.0, "rad/s", "a speed small enough to count as still"),
 }
+_ACCELERATION_LIMIT = Bound(0.1, 1e3, "rad/s²", "a joint acceleration bound, > 0 (None: from the reference)")
 _VELOCITY_LIMIT = Bound(1e-3, 100.0, "rad/s", "a joint speed limit, > 0 (None: the URDF's)")
 
 
@@ -104,11 +106,13 @@ class LiftSettings:
     tracking_weight: float = 100.0
     energy_weight: float = 1e-2
     velocity_weight: float = 1e-2
-    careful_motion: bool = True         # the acceleration cost and the stop_approach, one_way, terminal_rest
-                                        # constraints (issue 15)
+    careful_motion: bool = True         # the acceleration cost and the acceleration_limit, stop_approach,
+                                        # one_way, terminal_rest constraints (issue 15)
     acceleration_weight: float = 0.1    # per (rad/s^2)^2 s: smooth phases; measured against 1e-3 on the 40 kg
                                         # longest-hold searches: 28 % (84 °C) and 35 % (140 °C) fewer DDP
                                         # backward passes, the same holds (benchmarks/README.md)
+    acceleration_limit_rad_s2: float | None = None  # |mean acceleration over a step|; default: twice the
+                                                    # peak of the minimum-jerk reference (4.4 rad/s² here)
     stop_speed_rad_s: float = 0.1       # the speed toward a joint stop allowed at the stop,
     stop_slope_per_s: float = 2.0       #   growing by this per rad of distance from it
     one_way_tolerance_rad_s: float = 0.01   # the speed against a phase's direction allowed (and at the end)
@@ -119,8 +123,10 @@ class LiftSettings:
     def __post_init__(self):
         check_fields(self, _SRC, SETTING_BOUNDS)
         object.__setattr__(self, "limit_c", check_limit_c(_SRC, self.limit_c))
-        if self.velocity_limit_rad_s is not None:
-            check_fields(self, _SRC, {"velocity_limit_rad_s": _VELOCITY_LIMIT})
+        optional = {"velocity_limit_rad_s": _VELOCITY_LIMIT, "acceleration_limit_rad_s2": _ACCELERATION_LIMIT}
+        for name, bound in optional.items():
+            if getattr(self, name) is not None:
+                check_fields(self, _SRC, {name: bound})
         check_knots(_SRC, sum(self.knots().values()), self.dt_s)
         require(isinstance(self.careful_motion, bool), _SRC, "careful_motion", self.careful_motion,
                 "expected True or False")
@@ -135,6 +141,17 @@ class LiftSettings:
 def min_jerk(s: np.ndarray) -> np.ndarray:
     """Minimum-jerk profile from 0 to 1 over s in [0, 1]."""
     return 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
+
+
+MIN_JERK_PEAK_ACCELERATION = 10 / math.sqrt(3)  # max of min_jerk'' on [0, 1] (at s = 1/2 - sqrt(3)/6)
+
+
+def reference_acceleration_limit(settings: LiftSettings) -> float:
+    """The default acceleration bound: twice the peak acceleration of the minimum-jerk reference over the
+    shorter of the lift and the lowering (room to catch up with the reference, not a bang-bang at the
+    current limit)."""
+    distance = abs(settings.goal_rad - settings.start_rad)
+    return 2 * MIN_JERK_PEAK_ACCELERATION * distance / min(settings.lift_s, settings.lower_s) ** 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -227,7 +244,11 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         acceleration = model.runtime_payload_functions[0](x, u, env)[model.index(joint, "v_rad_s")]
         costs += (Cost("acceleration", 1.0, stage("acceleration", ca.sqrt(par["acceleration_weight"] * settings.dt_s)
                                                    * acceleration)),)
+        amax, iv = par["acceleration_limit_rad_s2"], model.index(joint, "v_rad_s")
+        mean_acceleration = (step(x, u, env)[iv] - v) / settings.dt_s  # over the interval: what a plot shows
         constraints += (
+            Constraint("acceleration_limit", stage("acceleration_limit", ca.vertcat(mean_acceleration - amax,
+                                                                                     -mean_acceleration - amax), "g")),
             Constraint("stop_approach", stage("stop_approach", stop_approach(
                 model, joint, x, par["stop_speed_rad_s"], par["stop_slope_per_s"]), "g")),
             Constraint("one_way", stage("one_way", ca.vertcat(-par["direction"] * v - still, par["hold_flag"] * v - still,
@@ -261,7 +282,9 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
     limits = winding_limits_c(model, settings.limit_c)
     check_idle_below_limits(model, limits)
     vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])  # default: the URDF's
-    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]], velocity_limit_rad_s=vmax)
+    amax = settings.acceleration_limit_rad_s2 or reference_acceleration_limit(settings)
+    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]], velocity_limit_rad_s=vmax,
+                                   acceleration_limit_rad_s2=amax)
     for name in ("start_rad", "goal_rad"):
         check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
