@@ -78,7 +78,7 @@ def test_unknown_option_and_bad_value_raise():
         plan_lift(40.0, 84.0, 5.0, horizon=3)
     with pytest.raises(InputError, match="solver"):
         plan_lift(40.0, 84.0, 5.0, solver="snopt")
-    for bad in (0.0, -2.0, float("nan")):
+    for bad in (0.0, -2.0, float("nan"), "fast"):
         with pytest.raises(InputError, match="acceleration_limit_rad_s2"):
             plan_lift(40.0, 84.0, 5.0, acceleration_limit_rad_s2=bad)
 
@@ -181,10 +181,6 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     near = (q < lo + 0.1) | (q > hi - 0.1)
     assert near.any() and np.abs(v[near]).max() <= 0.3
     assert abs(v[-1]) <= 0.01 and np.all((q >= lo) & (q <= hi))
-    from thermo_ddp.tasks.lift import reference_acceleration_limit
-    amax = reference_acceleration_limit(plan.settings)  # twice the min-jerk reference's peak over 2 s
-    assert plan.settings.acceleration_limit_rad_s2 == amax and 4.0 < amax < 5.0
-    assert np.abs(np.diff(v) / plan.settings.dt_s).max() <= amax * (1 + 1e-4)  # on the simulated motion
     m = MotionQuality.of(plan.time_s, q, v, lo, hi)
     assert m.reversals == plan.motion.reversals == 1 and m.inside_range and plan.motion.inside_range
     assert plan.motion.max_speed_near_stop_rad_s == pytest.approx(m.max_speed_near_stop_rad_s, abs=1e-6)
@@ -214,6 +210,24 @@ def test_careful_motion_constraints_matter_and_ddp_finds_ipopts_optimum():
     assert ddp.info["forward_passes"] >= ddp.iterations and ddp.info["multiplier_updates"] >= 1
 
 
+def test_acceleration_limit_bounds_the_motion_and_ddp_finds_ipopts_optimum():
+    """Near the longest hold at 84 °C (12.4 s unbounded) the plan accelerates harder than the bound of
+    reference_acceleration_limit (twice the min-jerk reference's peak: 4.4 rad/s²); with the bound the simulated
+    motion's speed changes by at most the bound per step, and DDP and IPOPT reach the same optimum."""
+    from thermo_ddp.tasks.lift import reference_acceleration_limit
+
+    amax = reference_acceleration_limit(LiftSettings())
+    assert amax == pytest.approx(2 * 10 / np.sqrt(3) * (np.pi / 2 - 0.05) / 2.0 ** 2)
+    free, bounded = plan_lift(40.0, 84.0, 12.0), plan_lift(40.0, 84.0, 12.0, acceleration_limit_rad_s2=amax)
+    assert free.feasible and bounded.feasible and free.motion.max_acceleration_rad_s2 > 1.1 * amax
+    sim = bounded.model.simulate(bounded.xs[0], bounded.us, bounded.settings.dt_s, bounded.settings.integrator)
+    assert np.abs(np.diff(sim["v_rad_s"][:, 0]) / bounded.settings.dt_s).max() <= amax * (1 + 1e-4)
+    assert bounded.motion.reversals == 1 and "acceleration_limit" in bounded.binding_constraints
+    lp = build_lift_problem(LiftSettings(hold_s=12.0, limit_c=84.0, acceleration_limit_rad_s2=amax))
+    ddp, ipopt = solve(lp, "ddp"), solve(lp, "ipopt")
+    assert ddp.success and ipopt.success and abs(ddp.cost - ipopt.cost) <= 1e-4 * abs(ipopt.cost)
+
+
 def test_motion_quality_counts_reversals_and_speed_near_the_stops():
     from thermo_ddp.tasks._common import MotionQuality
 
@@ -241,14 +255,15 @@ def test_every_number_of_a_request_is_a_runtime_parameter(careful):
     same functions (so one compiled solver serves both); the payload read from the parameters is the model's."""
     import dataclasses
     from thermo_ddp.model.actuated import load_model
-    first = LiftSettings(payload_kg=40.0, limit_c=84.0, hold_s=3.0, careful_motion=careful)
+    first = LiftSettings(payload_kg=40.0, limit_c=84.0, hold_s=3.0, careful_motion=careful,
+                         acceleration_limit_rad_s2=4.0)
     numbers = {f.name: getattr(first, f.name) for f in dataclasses.fields(LiftSettings)
                if isinstance(getattr(first, f.name), float) and f.name not in ("dt_s", "payload_kg", "limit_c")}
     other = {name: value * 0.9 for name, value in numbers.items()}  # every other number of the request changed
     a = build_lift_problem(first)
     b = build_lift_problem(LiftSettings(payload_kg=25.0, limit_c=120.0, careful_motion=careful,
-                                        velocity_limit_rad_s=2.0, acceleration_limit_rad_s2=3.0, **other))
-    assert b.params[5, LIFT_PARAMETERS.slice("acceleration_limit_rad_s2")] == 3.0
+                                        velocity_limit_rad_s=2.0, **other))
+    assert b.params[5, LIFT_PARAMETERS.slice("acceleration_limit_rad_s2")] == pytest.approx(3.6)
     assert a.problem.horizon != b.problem.horizon
     assert _structure(a.problem) == _structure(b.problem)
     own = load_model(payload_kg=25.0).step(b.settings.dt_s, b.settings.integrator)

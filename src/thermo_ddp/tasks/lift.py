@@ -10,10 +10,11 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
   ``return_band`` (back down at the end); the current box |i| <= peak;
 - with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
   ``acceleration`` (smooth phases: the joint acceleration of the model's ODE) and the constraints
-  ``acceleration_limit`` (the mean acceleration over each step, default twice the reference's peak),
   ``stop_approach`` (the speed near a joint stop shrinks with the distance to it), ``one_way`` (the lift moves
   only toward the goal, the hold is still, the lowering only toward the start: up, hold, down and no other
-  reversal) and ``terminal_rest``.
+  reversal) and ``terminal_rest``;
+- with ``acceleration_limit_rad_s2`` (off by default), the constraint ``acceleration_limit`` on the mean
+  acceleration over each step (e.g. :func:`reference_acceleration_limit`).
 When the requested hold is infeasible, the longest feasible hold is found by bisection over
 complete optimisations (each a feasibility verdict of the solver), not guessed.
 """
@@ -80,7 +81,7 @@ SETTING_BOUNDS = {
     "stop_slope_per_s": Bound(0.0, 1e3, "1/s", "how fast the speed allowed grows away from a stop"),
     "one_way_tolerance_rad_s": Bound(1e-6, 1.0, "rad/s", "a speed small enough to count as still"),
 }
-_ACCELERATION_LIMIT = Bound(0.1, 1e3, "rad/s²", "a joint acceleration bound, > 0 (None: from the reference)")
+_ACCELERATION_LIMIT = Bound(0.1, 1e3, "rad/s²", "a joint acceleration bound, > 0 (None: no bound)")
 _VELOCITY_LIMIT = Bound(1e-3, 100.0, "rad/s", "a joint speed limit, > 0 (None: the URDF's)")
 
 
@@ -106,13 +107,14 @@ class LiftSettings:
     tracking_weight: float = 100.0
     energy_weight: float = 1e-2
     velocity_weight: float = 1e-2
-    careful_motion: bool = True         # the acceleration cost and the acceleration_limit, stop_approach,
-                                        # one_way, terminal_rest constraints (issue 15)
+    careful_motion: bool = True         # the acceleration cost and the stop_approach, one_way, terminal_rest
+                                        # constraints (issue 15)
     acceleration_weight: float = 0.1    # per (rad/s^2)^2 s: smooth phases; measured against 1e-3 on the 40 kg
                                         # longest-hold searches: 28 % (84 °C) and 35 % (140 °C) fewer DDP
                                         # backward passes, the same holds (benchmarks/README.md)
-    acceleration_limit_rad_s2: float | None = None  # |mean acceleration over a step|; default: twice the
-                                                    # peak of the minimum-jerk reference (4.4 rad/s² here)
+    acceleration_limit_rad_s2: float | None = None  # bound on |mean acceleration over a step| (None: none).
+    # Off by default: with reference_acceleration_limit's 4.4 rad/s² the 40 kg searches take DDP 2.1 s instead
+    # of 0.8-1.1 s and the fixed-horizon solves up to 5x longer (benchmarks/README.md, issue 15)
     stop_speed_rad_s: float = 0.1       # the speed toward a joint stop allowed at the stop,
     stop_slope_per_s: float = 2.0       #   growing by this per rad of distance from it
     one_way_tolerance_rad_s: float = 0.01   # the speed against a phase's direction allowed (and at the end)
@@ -147,9 +149,9 @@ MIN_JERK_PEAK_ACCELERATION = 10 / math.sqrt(3)  # max of min_jerk'' on [0, 1] (a
 
 
 def reference_acceleration_limit(settings: LiftSettings) -> float:
-    """The default acceleration bound: twice the peak acceleration of the minimum-jerk reference over the
-    shorter of the lift and the lowering (room to catch up with the reference, not a bang-bang at the
-    current limit)."""
+    """A bound for ``acceleration_limit_rad_s2``: twice the peak acceleration of the minimum-jerk reference
+    over the shorter of the lift and the lowering (room to catch up with the reference, not a bang-bang at
+    the current limit; 4.4 rad/s² for the default lift)."""
     distance = abs(settings.goal_rad - settings.start_rad)
     return 2 * MIN_JERK_PEAK_ACCELERATION * distance / min(settings.lift_s, settings.lower_s) ** 2
 
@@ -191,9 +193,11 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     direction = np.zeros(q_ref.size)
     direction[:first] = np.sign(g - s0)               # lifting: toward the goal only
     direction[first + hold + 1:] = np.sign(s0 - g)    # lowering and resting: toward the start only
+    request = {name: getattr(settings, name) for name in _REQUEST}
+    if request["acceleration_limit_rad_s2"] is None:
+        request["acceleration_limit_rad_s2"] = 0.0  # no bound: no function reads it
     p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
-                               hold_flag=flag, ambient_c=ambient_c, direction=direction,
-                               **{name: getattr(settings, name) for name in _REQUEST})
+                               hold_flag=flag, ambient_c=ambient_c, direction=direction, **request)
     return p, (first, first + hold)
 
 
@@ -244,17 +248,18 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         acceleration = model.runtime_payload_functions[0](x, u, env)[model.index(joint, "v_rad_s")]
         costs += (Cost("acceleration", 1.0, stage("acceleration", ca.sqrt(par["acceleration_weight"] * settings.dt_s)
                                                    * acceleration)),)
-        amax, iv = par["acceleration_limit_rad_s2"], model.index(joint, "v_rad_s")
-        mean_acceleration = (step(x, u, env)[iv] - v) / settings.dt_s  # over the interval: what a plot shows
         constraints += (
-            Constraint("acceleration_limit", stage("acceleration_limit", ca.vertcat(mean_acceleration - amax,
-                                                                                     -mean_acceleration - amax), "g")),
             Constraint("stop_approach", stage("stop_approach", stop_approach(
                 model, joint, x, par["stop_speed_rad_s"], par["stop_slope_per_s"]), "g")),
             Constraint("one_way", stage("one_way", ca.vertcat(-par["direction"] * v - still, par["hold_flag"] * v - still,
                                                               -par["hold_flag"] * v - still), "g")))
         terminal_constraints += (Constraint("terminal_rest", terminal("terminal_rest", ca.vertcat(v - still, -v - still),
                                                                       "g")),)
+    if settings.acceleration_limit_rad_s2 is not None:
+        amax = par["acceleration_limit_rad_s2"]
+        mean = (step(x, u, env)[model.index(joint, "v_rad_s")] - v) / settings.dt_s  # what a plot of v shows
+        constraints += (Constraint("acceleration_limit", stage("acceleration_limit",
+                                                               ca.vertcat(mean - amax, -mean - amax), "g")),)
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
 
 
@@ -262,8 +267,9 @@ _PROBLEMS = Memo()  # the lift's OCP by what its functions are built from (the h
 
 
 def _structure(model: ActuatedArm, settings: LiftSettings) -> OptimalControlProblem:
-    """The lift's OCP for the model's structure, the step, the integrator and ``careful_motion`` (built once
-    in a process, with its :attr:`OptimalControlProblem.functions`); its horizon is set by the caller."""
+    """The lift's OCP for the model's structure, the step, the integrator, ``careful_motion`` and whether the
+    acceleration is bounded (built once in a process, with its :attr:`OptimalControlProblem.functions`); its
+    horizon is set by the caller."""
     def build():
         dyn, dyn_jac, costs, tcosts, cons, tcons, peak = _functions(model, settings)
         problem = OptimalControlProblem(dyn, 1, costs, tcosts, cons, tcons, u_lb=[-peak], u_ub=[peak], name="lift",
@@ -271,7 +277,9 @@ def _structure(model: ActuatedArm, settings: LiftSettings) -> OptimalControlProb
         problem.functions  # built here, shared by every horizon
         return problem
 
-    return _PROBLEMS.get((model.structure_key, settings.dt_s, settings.integrator, settings.careful_motion), build)
+    key = (model.structure_key, settings.dt_s, settings.integrator, settings.careful_motion,
+           settings.acceleration_limit_rad_s2 is not None)
+    return _PROBLEMS.get(key, build)
 
 
 def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None) -> LiftProblem:
@@ -282,9 +290,7 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
     limits = winding_limits_c(model, settings.limit_c)
     check_idle_below_limits(model, limits)
     vmax = settings.velocity_limit_rad_s or float(model.arm.model.velocityLimit[0])  # default: the URDF's
-    amax = settings.acceleration_limit_rad_s2 or reference_acceleration_limit(settings)
-    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]], velocity_limit_rad_s=vmax,
-                                   acceleration_limit_rad_s2=amax)
+    settings = dataclasses.replace(settings, limit_c=limits[model.joints[0]], velocity_limit_rad_s=vmax)
     for name in ("start_rad", "goal_rad"):
         check_in_joint_range(model, _SRC, name, model.joints[0], getattr(settings, name))
     params, hold = _reference(settings, settings.hold_s, model.ambient_c)
