@@ -29,8 +29,13 @@ error >= 50 %) and their collinear partners are reported, never used to reject a
 node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
 the drive node of ``two_node_drive``) and is listed in ``not_determinable``.  With several segments
 (recordings, or stretches between gaps) every term of the chosen set is also judged leaving one segment
-out (:func:`~thermo_ddp.diagnose.selection.select_held_out`): a term that does not lower the held-out
-RMSE is withdrawn (``not_determinable`` says why) and the selection repeated without it.  A chosen
+out (:func:`~thermo_ddp.diagnose.selection.select_held_out`, ``HELD_OUT_RULE``): only on segments that can
+judge it (they start at thermal rest, since a fold predicts from the network's equilibrium; the others hold
+at least as many samples of each of their operating regimes and reach their speeds and currents: else the
+fold extrapolates), a term whose held-out RMSE is higher with it than without, beyond the noise of one
+reading, is withdrawn (``not_determinable`` says why) and the selection repeated without it; a tie or no
+segment able to judge is no evidence against it: it stands on the in-sample test, as with one recording,
+and ``not_determinable`` says it was not confirmed held out.  A chosen
 running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
@@ -59,8 +64,8 @@ from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THER
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
 from ..model.parameters import THERMAL_KEYS
 from ..recordings import as_recordings, read_recordings
-from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
-                                noise_model, thermal_regimes)
+from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, local_slope,
+                                locate_thermal, noise_model, thermal_regimes)
 from .localise import Localisation, ResidualSeries
 from .selection import HeldOutCheck, SubsetFit, SubsetSelection, SubsetSettings, TermSpec, select_held_out
 
@@ -106,6 +111,14 @@ ROOM_NOTE = {"term": "drive_heating",
                        "room warmer than the parameter file's ambient_c; fitted in every model as the room's stand-in, "
                        "not named",
              "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
+# How a term is judged leaving one segment out (diagnosis JSON and report).
+HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of the "
+                 "other segments (validation: every segment); a chosen term is judged on the segments that can judge "
+                 "it: those starting at thermal rest (the prediction starts from the network's equilibrium), whose "
+                 "operating regimes (at rest, loaded at rest, moving) the others hold at least as many samples of, and "
+                 "whose speeds and currents they reach; a term whose pooled held-out RMSE there is higher with it than "
+                 "without, by more than the noise of one reading, is withdrawn; a tie, or no segment able to judge, is "
+                 "no evidence against it: it stands on the in-sample test and not_determinable says so")
 _CASING_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
 
 
@@ -307,22 +320,50 @@ class _Fitter:
         chosen = range(len(folds)) if segments is None else segments
         return float(np.sqrt(np.mean(np.concatenate([folds[r] for r in chosen]) ** 2)))
 
-    def covered(self, term: str, r: int) -> bool:
-        """Segment ``r`` can judge ``term`` held out: the other segments hold at least as many samples (a fit
-        of less data than it predicts extrapolates) and, when the term is driven by speed, reach its speeds
-        (95th percentile of |v|: a fit of standing recordings says nothing about motion)."""
+    def covered(self, r: int) -> str:
+        """Why segment ``r`` cannot judge a term held out ('' when it can); the same for every term.  Its fold
+        predicts it from the network's equilibrium under its first inputs, fitted on the other segments: so it
+        must start at thermal rest (temperature trend within the regimes' ``trend_k_per_h``: an unmeasured node
+        away from that equilibrium biases every network with one), the others must hold at least as many samples
+        of each of its operating regimes (at rest, loaded at rest, moving: a fit of less data than it predicts
+        extrapolates) and reach its speeds and currents (95th percentiles)."""
+        grid, s = self.grids[r], self.settings.regimes
         others = [g for k, g in enumerate(self.grids) if k != r]
-        if sum(len(g) for g in others) < len(self.grids[r]):
-            return False
-        top = [float(np.percentile(np.abs(g.velocity), 95)) for g in others]
-        return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
+        trend = 3600.0 * abs(float(local_slope(grid.time_s, grid.measured_c, s.trend_window_s)[0]))
+        if trend > s.trend_k_per_h:
+            return f"{grid.name} starts {trend:.2g} K/h away from rest"
+        mine, theirs = _operating(grid, s), np.sum([_operating(g, s) for g in others], axis=0)
+        short = [name for name, n, m in zip(("at rest", "loaded at rest", "moving"), mine, theirs) if m < n]
+        if short:
+            return f"the other segments hold fewer samples {'/'.join(short)} than {grid.name}"
+        for label, values in (("speed", lambda g: g.velocity), ("current", lambda g: g.current_a)):
+            if _p95(values(grid)) > max(_p95(values(g)) for g in others):
+                return f"the other segments do not reach the {label} of {grid.name}"
+        return ""
 
-    def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
-        """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none, or
-        no usable fold fit of either set)."""
-        segments = [r for r in range(len(self.grids)) if self.covered(term, r)]
-        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without)) if segments else ()
-        return scores if any(map(math.isfinite, scores)) else None
+    def held_out(self, term: str, with_term: frozenset, without: frozenset) -> HeldOutCheck:
+        """Leave-one-segment-out RMSE of both sets pooled over the segments that can judge (:meth:`covered`);
+        differences within the noise of one reading of the set with the term are ties."""
+        why = {r: self.covered(r) for r in range(len(self.grids))}
+        segments = [r for r, reason in why.items() if not reason]
+        if not segments:
+            return HeldOutCheck(term, undecided="; ".join(why.values()))
+        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without))
+        if not all(map(math.isfinite, scores)):
+            return HeldOutCheck(term, undecided="a fit of the other segments did not converge")
+        tie = _noise(self.fits[with_term], self.grids, self.settings.localise.noise_window_s).total_c
+        return HeldOutCheck(term, *scores, tie, tuple(self.grids[r].name for r in segments))
+
+
+def _p95(values: np.ndarray) -> float:
+    return float(np.percentile(np.abs(values), 95))
+
+
+def _operating(grid: ThermalGrid, settings: ThermalRegimeSettings) -> np.ndarray:
+    """Samples at rest, loaded at rest and moving (the regimes' current and speed thresholds)."""
+    moving = np.abs(grid.velocity) > settings.moving_rad_s
+    loaded = ~moving & (np.abs(grid.current_a) > settings.load_a)
+    return np.array([np.sum(~moving & ~loaded), np.sum(loaded), np.sum(moving)])
 
 
 def _labels(fit: ThermalFit) -> np.ndarray:
@@ -500,13 +541,12 @@ class ThermalDiagnosis:
                                  "rmse_before": self.cv_rmse[0], "rmse_after": self.cv_rmse[1]}
         if self.segment_cv is not None:
             out["validation"]["leave_one_segment_out"] = {
-                "method": "each segment (recording or stretch between gaps) predicted from its first measurement "
-                          "by a fit of the other segments; a term is named only if it lowers this held-out RMSE "
-                          "(judged on segments the others outnumber in samples and, for a speed-driven term, "
-                          "reach in speed)",
+                "method": HELD_OUT_RULE,
                 "segments": list(self.segment_cv[2]), "rmse_before": self.segment_cv[0], "rmse_after": self.segment_cv[1],
-                "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "named": t in self.missing_physics}
-                          for t, c in self.held_out.items()}}
+                "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "verdict": c.verdict,
+                              "tie_c": c.tie_c, "named": t in self.missing_physics}
+                          for t, c in self.held_out.items() if c.verdict != "undecided"},
+                "undecided": {t: c.undecided for t, c in self.held_out.items() if c.verdict == "undecided"}}
         return out
 
     def report(self) -> str:
@@ -525,7 +565,9 @@ class ThermalDiagnosis:
                   f"({self.noise.total_c:.3g} K); held-out rmse {self.cv_rmse[0]:.4g} -> {self.cv_rmse[1]:.4g} K; "
                   f"{len(self.localisations[1].mismatches)} unexplained intervals"]
         if self.segment_cv is not None:
-            lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K")
+            lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K; "
+                         + "; ".join(f"{t}: {c.verdict}, {c}" for t, c in sorted(self.held_out.items())))
+            lines.append(f"  rule: {HELD_OUT_RULE}")
         lines.append(final.fit_report())
         return "\n".join(lines)
 
@@ -604,12 +646,22 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
     return out
 
 
-def _withdrawn(checks: Mapping[str, HeldOutCheck]) -> list[dict]:
-    """Terms the fit of every segment wanted that a held-out segment does not confirm: not claimed."""
-    return [{"term": t, "experiment": EXPERIMENTS[t],
-             "reason": f"lowers the residual of the data it is fitted on, not the error on unseen data (leave one "
-                       f"segment out: {c}): not claimed, and not in the final model"}
-            for t, c in sorted(checks.items()) if not c.improves]
+def _held_out_notes(checks: Mapping[str, HeldOutCheck], named: frozenset) -> list[dict]:
+    """Terms a held-out segment predicts worse with than without: withdrawn, not claimed.  Named terms the
+    held-out segments could not judge (undecided, or a tie within the noise): claimed on the in-sample test
+    alone, and said so."""
+    out = []
+    for t, c in sorted(checks.items()):
+        if c.withdraws:
+            reason = (f"lowers the residual of the data it is fitted on, not the error on unseen data (leave one "
+                      f"segment out: {c}): not claimed, and not in the final model")
+        elif t in named and not c.improves:
+            reason = (f"named on the in-sample test alone: leaving one segment out cannot confirm it ({c}); "
+                      "nothing held out speaks against it either")
+        else:
+            continue
+        out.append({"term": t, "reason": reason, "experiment": EXPERIMENTS[t]})
+    return out
 
 
 def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
@@ -695,10 +747,9 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
         if selection is not None:
             fitter.polish(selection.chosen.terms)
             cv = (fitter.cv_rmse(base), fitter.cv_rmse(selection.chosen.terms))
-            judged = [r for r in range(len(grids)) if all(fitter.covered(t, r) for t in selection.chosen.terms)]
-            if several and judged:
-                segment_cv = (fitter.segment_rmse(base, judged), fitter.segment_rmse(selection.chosen.terms, judged),
-                              tuple(grids[r].name for r in judged))
+            if several:
+                segment_cv = (fitter.segment_rmse(base), fitter.segment_rmse(selection.chosen.terms),
+                              tuple(g.name for g in grids))
     fits = dict(fitter.fits)
     if selection is None:
         return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
@@ -721,7 +772,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                     "network does (a wrong column or a broken sensor?); nothing here can be diagnosed")
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
-                            tuple(skipped) + tuple(unresolved) + tuple(_withdrawn(held_out))
+                            tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
                             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)),
                             settings.cv_blocks, hosted, base, held_out, segment_cv)
 
