@@ -29,13 +29,13 @@ error >= 50 %) and their collinear partners are reported, never used to reject a
 node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
 the drive node of ``two_node_drive``) and is listed in ``not_determinable``.  With several segments
 (recordings, or stretches between gaps) every term of the chosen set is also judged leaving one segment
-out (:func:`~thermo_ddp.diagnose.selection.select_held_out`, ``HELD_OUT_RULE``): only on segments that can
-judge it (they start at thermal rest, since a fold predicts from the network's equilibrium; the others hold
-at least as many samples of each of their operating regimes and reach their speeds and currents: else the
-fold extrapolates), a term whose held-out RMSE is higher with it than without, beyond the noise of one
-reading, is withdrawn (``not_determinable`` says why) and the selection repeated without it; a tie or no
-segment able to judge is no evidence against it: it stands on the in-sample test, as with one recording,
-and ``not_determinable`` says it was not confirmed held out.  A chosen
+out (:func:`~thermo_ddp.diagnose.selection.select_held_out`, ``HELD_OUT_RULE``), on the segments that can
+judge it: the others hold more samples, reach its speeds and hold every operating regime it spends time in
+(else the fold extrapolates), and, when a network has an unmeasured node, it starts at
+thermal rest (a fold predicts from the network's equilibrium).  A term whose held-out RMSE there is higher
+with it than without, beyond the noise of one reading, is withdrawn (``not_determinable`` says why) and
+the selection repeated without it; a tie, or no segment able to judge, is no evidence against it: it
+stands on the in-sample test, as with one recording, and ``not_determinable`` says so.  A chosen
 running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
@@ -113,12 +113,13 @@ ROOM_NOTE = {"term": "drive_heating",
              "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
 # How a term is judged leaving one segment out (diagnosis JSON and report).
 HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of the "
-                 "other segments (validation: every segment); a chosen term is judged on the segments that can judge "
-                 "it: those starting at thermal rest (the prediction starts from the network's equilibrium), whose "
-                 "operating regimes (at rest, loaded at rest, moving) the others hold at least as many samples of, and "
-                 "whose speeds and currents they reach; a term whose pooled held-out RMSE there is higher with it than "
-                 "without, by more than the noise of one reading, is withdrawn; a tie, or no segment able to judge, is "
-                 "no evidence against it: it stands on the in-sample test and not_determinable says so")
+                 "other segments; a chosen term is judged on the segments that can judge it: the others hold more "
+                 "samples, reach its speeds and hold every operating regime it spends time in (at rest, loaded at "
+                 "rest, moving), and, when either network has a node besides the sensor, it starts at thermal rest "
+                 "(the prediction starts from the network's equilibrium); a term whose pooled held-out RMSE there is "
+                 "higher with it than without, by more than the noise of one reading, is withdrawn; a tie, or no "
+                 "segment able to judge, is no evidence against it: it stands on the in-sample test and "
+                 "not_determinable says so; validation: the segments every chosen term was judged on")
 _CASING_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
 
 
@@ -321,30 +322,33 @@ class _Fitter:
         return float(np.sqrt(np.mean(np.concatenate([folds[r] for r in chosen]) ** 2)))
 
     def covered(self, r: int) -> str:
-        """Why segment ``r`` cannot judge a term held out ('' when it can); the same for every term.  Its fold
-        predicts it from the network's equilibrium under its first inputs, fitted on the other segments: so it
-        must start at thermal rest (temperature trend within the regimes' ``trend_k_per_h``: an unmeasured node
-        away from that equilibrium biases every network with one), the others must hold at least as many samples
-        of each of its operating regimes (at rest, loaded at rest, moving: a fit of less data than it predicts
-        extrapolates) and reach its speeds and currents (95th percentiles)."""
-        grid, s = self.grids[r], self.settings.regimes
+        """Why a fit of the other segments extrapolates to segment ``r`` ('' when it does not): they must hold at
+        least as many samples, reach its speeds (95th percentile of |v|), and hold at least ``min_samples`` of
+        every operating regime (at rest, loaded at rest, moving) it holds that many of."""
+        grid, s, least = self.grids[r], self.settings.regimes, self.settings.min_samples
         others = [g for k, g in enumerate(self.grids) if k != r]
-        trend = 3600.0 * abs(float(local_slope(grid.time_s, grid.measured_c, s.trend_window_s)[0]))
-        if trend > s.trend_k_per_h:
-            return f"{grid.name} starts {trend:.2g} K/h away from rest"
+        if sum(len(g) for g in others) < len(grid):
+            return f"the other segments hold fewer samples than {grid.name}"
+        if _p95(grid.velocity) > max(_p95(g.velocity) for g in others):
+            return f"the other segments do not reach the speeds of {grid.name}"
         mine, theirs = _operating(grid, s), np.sum([_operating(g, s) for g in others], axis=0)
-        short = [name for name, n, m in zip(("at rest", "loaded at rest", "moving"), mine, theirs) if m < n]
-        if short:
-            return f"the other segments hold fewer samples {'/'.join(short)} than {grid.name}"
-        for label, values in (("speed", lambda g: g.velocity), ("current", lambda g: g.current_a)):
-            if _p95(values(grid)) > max(_p95(values(g)) for g in others):
-                return f"the other segments do not reach the {label} of {grid.name}"
-        return ""
+        unseen = [name for name, n, m in zip(("at rest", "loaded at rest", "moving"), mine, theirs) if n >= least > m]
+        return f"the other segments hold no {'/'.join(unseen)} stretch like {grid.name}'s" if unseen else ""
+
+    def unsettled(self, r: int) -> str:
+        """Why segment ``r`` does not start at thermal rest ('' when it does: its temperature trend at the start
+        within the regimes' ``trend_k_per_h``).  A fold predicts it from the network's equilibrium under its
+        first inputs: an unmeasured node then starts wherever that equilibrium puts it, not where it was."""
+        grid, s = self.grids[r], self.settings.regimes
+        trend = 3600.0 * abs(float(local_slope(grid.time_s, grid.measured_c, s.trend_window_s)[0]))
+        return f"{grid.name} starts {trend:.2g} K/h away from rest" if trend > s.trend_k_per_h else ""
 
     def held_out(self, term: str, with_term: frozenset, without: frozenset) -> HeldOutCheck:
-        """Leave-one-segment-out RMSE of both sets pooled over the segments that can judge (:meth:`covered`);
-        differences within the noise of one reading of the set with the term are ties."""
-        why = {r: self.covered(r) for r in range(len(self.grids))}
+        """Leave-one-segment-out RMSE of both sets pooled over the segments that can judge: covered
+        (:meth:`covered`) and, when either network has a node besides the sensor, settled at the start
+        (:meth:`unsettled`); differences within the noise of one reading of the set with the term are ties."""
+        hidden = any(len(self.model(terms).nodes) > 1 for terms in (with_term, without))
+        why = {r: self.covered(r) or (self.unsettled(r) if hidden else "") for r in range(len(self.grids))}
         segments = [r for r, reason in why.items() if not reason]
         if not segments:
             return HeldOutCheck(term, undecided="; ".join(why.values()))
@@ -747,9 +751,11 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
         if selection is not None:
             fitter.polish(selection.chosen.terms)
             cv = (fitter.cv_rmse(base), fitter.cv_rmse(selection.chosen.terms))
-            if several:
-                segment_cv = (fitter.segment_rmse(base), fitter.segment_rmse(selection.chosen.terms),
-                              tuple(g.name for g in grids))
+            judged = [r for r, g in enumerate(grids) if all(g.name in c.segments for c in held_out.values()
+                                                              if c.term in selection.chosen.terms)]
+            if several and judged:  # the segments every chosen term was judged on (all when none was)
+                segment_cv = (fitter.segment_rmse(base, judged), fitter.segment_rmse(selection.chosen.terms, judged),
+                              tuple(grids[r].name for r in judged))
     fits = dict(fitter.fits)
     if selection is None:
         return ThermalDiagnosis(names, params, grids, False, "model_does_not_fit",
