@@ -229,7 +229,7 @@ def test_a_true_casing_node_is_not_withdrawn_on_evidence_that_is_not_against_it(
     assert len(check.segments) == judged and not check.withdraws
     note = [n for n in d.not_determinable if n["term"] == "casing_node" and "in-sample test alone" in n["reason"]]
     assert bool(note) == (verdict != "lowers")
-    assert "rule:" in d.report() or not judged
+    assert "rule:" in d.report() and f"held out, casing_node: {verdict}" in d.report()
 
 
 def test_friction_heat_is_confirmed_on_the_recordings_that_can_judge_it():

@@ -112,8 +112,8 @@ ROOM_NOTE = {"term": "drive_heating",
                        "not named",
              "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
 # How a term is judged leaving one segment out (diagnosis JSON and report).
-HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of the "
-                 "other segments; a chosen term is judged on the segments that can judge it: the others hold more "
+HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of "
+                 "the other segments; a chosen term is judged on the segments that can judge it: the others hold more "
                  "samples, reach its speeds and hold every operating regime it spends time in (at rest, loaded at "
                  "rest, moving), and, when either network has a node besides the sensor, it starts at thermal rest "
                  "(the prediction starts from the network's equilibrium); a term whose pooled held-out RMSE there is "
@@ -569,8 +569,9 @@ class ThermalDiagnosis:
                   f"({self.noise.total_c:.3g} K); held-out rmse {self.cv_rmse[0]:.4g} -> {self.cv_rmse[1]:.4g} K; "
                   f"{len(self.localisations[1].mismatches)} unexplained intervals"]
         if self.segment_cv is not None:
-            lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K; "
-                         + "; ".join(f"{t}: {c.verdict}, {c}" for t, c in sorted(self.held_out.items())))
+            lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K")
+        if self.held_out:
+            lines += [f"  held out, {t}: {c.verdict}, {c}" for t, c in sorted(self.held_out.items())]
             lines.append(f"  rule: {HELD_OUT_RULE}")
         lines.append(final.fit_report())
         return "\n".join(lines)
@@ -778,7 +779,8 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                     "network does (a wrong column or a broken sensor?); nothing here can be diagnosed")
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
-                            tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
+                            tuple(skipped) + tuple(unresolved)
+                            + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
                             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)),
                             settings.cv_blocks, hosted, base, held_out, segment_cv)
 
