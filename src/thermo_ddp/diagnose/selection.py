@@ -310,31 +310,55 @@ def subset_select(fits: Sequence[SubsetFit], settings: SubsetSettings | None = N
 
 @dataclasses.dataclass(frozen=True)
 class HeldOutCheck:
-    """A term of a chosen set judged on data no fit saw: the held-out RMSE of the set with the term and
-    of the set without it (e.g. leave one segment out: each segment predicted by a fit of the others)."""
+    """A term of a chosen set judged on data no fit saw: the pooled held-out RMSE of the set with the term and
+    of the set without it over the ``segments`` that can judge it (e.g. leave one segment out: each segment
+    predicted by a fit of the others).  Differences within ``tie_c`` (the noise of one reading) are ties;
+    ``undecided`` says why no segment can judge the term (then the RMSEs are NaN).
+
+    Verdicts: ``lowers`` (with < without - tie), ``raises`` (with > without + tie: the term is withdrawn),
+    ``tie``, ``undecided``; only ``raises`` is evidence against the term."""
 
     term: str
-    with_term: float
-    without: float
+    with_term: float = math.nan
+    without: float = math.nan
+    tie_c: float = 0.0
+    segments: tuple[str, ...] = ()
+    undecided: str = ""
+
+    @property
+    def verdict(self) -> str:
+        if self.undecided:
+            return "undecided"
+        change = self.with_term - self.without
+        return "lowers" if change < -self.tie_c else "raises" if change > self.tie_c else "tie"
 
     @property
     def improves(self) -> bool:
-        return self.with_term < self.without
+        return self.verdict == "lowers"
+
+    @property
+    def withdraws(self) -> bool:
+        return self.verdict == "raises"
 
     def __str__(self) -> str:
-        return f"held-out RMSE {self.without:.3g} K without it, {self.with_term:.3g} K with it"
+        if self.undecided:
+            return f"not judged: {self.undecided}"
+        text = f"held-out RMSE {self.without:.3g} K without it, {self.with_term:.3g} K with it"
+        return text + (f" (a tie: within the {self.tie_c:.2g} K noise of one reading)" if self.verdict == "tie" else "")
 
 
-HeldOut = Callable[[str, frozenset, frozenset], "tuple[float, float] | None"]
+HeldOut = Callable[[str, frozenset, frozenset], HeldOutCheck]
 
 
 def select_held_out(fits: Sequence[SubsetFit], held_out: HeldOut | None, fixed: frozenset = frozenset(),
                     settings: SubsetSettings | None = None) -> tuple[SubsetSelection | None, dict[str, HeldOutCheck]]:
     """:func:`subset_select`, then every term of the chosen set (but the ``fixed`` ones) judged on held-out
-    data: ``held_out(term, chosen, chosen - {term})`` gives the held-out RMSE of both sets (None when these
-    data cannot judge the term that way).  A term that does not lower it is withdrawn and the selection
-    repeated among the sets without it, until every judged term of the chosen set lowers the held-out
-    error.  Returns the selection and the last verdict on every judged term (withdrawn ones included)."""
+    data: ``held_out(term, chosen, chosen - {term})`` gives the :class:`HeldOutCheck`.  A term whose held-out
+    RMSE is higher with it than without, beyond the tie, is withdrawn and the selection repeated among the sets
+    without it, until no judged term of the chosen set raises the held-out error.  A tie or an undecided check
+    (no segment can judge the term) is no evidence against it: the term stands on the in-sample test, as it
+    does when there are no held-out data at all.  Returns the selection and the last check on every judged
+    term (withdrawn ones included)."""
     withdrawn: set[str] = set()
     checks: dict[str, HeldOutCheck] = {}
     while True:
@@ -342,10 +366,9 @@ def select_held_out(fits: Sequence[SubsetFit], held_out: HeldOut | None, fixed: 
         if selection is None or held_out is None:
             return selection, checks
         chosen = selection.chosen.terms
-        scores = {t: held_out(t, chosen, chosen - {t}) for t in sorted(chosen - fixed)}
-        verdicts = {t: HeldOutCheck(t, *score) for t, score in scores.items() if score is not None}
+        verdicts = {t: held_out(t, chosen, chosen - {t}) for t in sorted(chosen - fixed)}
         checks.update(verdicts)
-        failed = {t for t, c in verdicts.items() if not c.improves}
+        failed = {t for t, c in verdicts.items() if c.withdraws}
         for term in sorted(failed):
             log.info("%s withdrawn: %s", term, verdicts[term])
         if not failed:

@@ -29,8 +29,13 @@ error >= 50 %) and their collinear partners are reported, never used to reject a
 node whose fitted winding time constant is shorter than the data's step is not named (it only hosts
 the drive node of ``two_node_drive``) and is listed in ``not_determinable``.  With several segments
 (recordings, or stretches between gaps) every term of the chosen set is also judged leaving one segment
-out (:func:`~thermo_ddp.diagnose.selection.select_held_out`): a term that does not lower the held-out
-RMSE is withdrawn (``not_determinable`` says why) and the selection repeated without it.  A chosen
+out (:func:`~thermo_ddp.diagnose.selection.select_held_out`, ``HELD_OUT_RULE``), on the segments that can
+judge it: the others hold more samples, reach its speeds and hold every operating regime it spends time in
+(else the fold extrapolates), and, when a network has an unmeasured node, it starts at
+thermal rest (a fold predicts from the network's equilibrium).  A term whose held-out RMSE there is higher
+with it than without, beyond the noise of one reading, is withdrawn (``not_determinable`` says why) and
+the selection repeated without it; a tie, or no segment able to judge, is no evidence against it: it
+stands on the in-sample test, as with one recording, and ``not_determinable`` says so.  A chosen
 running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
@@ -59,8 +64,8 @@ from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THER
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
 from ..model.parameters import THERMAL_KEYS
 from ..recordings import as_recordings, read_recordings
-from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, locate_thermal,
-                                noise_model, thermal_regimes)
+from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, local_slope,
+                                locate_thermal, noise_model, thermal_regimes)
 from .localise import Localisation, ResidualSeries
 from .selection import HeldOutCheck, SubsetFit, SubsetSelection, SubsetSettings, TermSpec, select_held_out
 
@@ -106,6 +111,15 @@ ROOM_NOTE = {"term": "drive_heating",
                        "room warmer than the parameter file's ambient_c; fitted in every model as the room's stand-in, "
                        "not named",
              "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
+# How a term is judged leaving one segment out (diagnosis JSON and report).
+HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of "
+                 "the other segments; a chosen term is judged on the segments that can judge it: the others hold more "
+                 "samples, reach its speeds and hold every operating regime it spends time in (at rest, loaded at "
+                 "rest, moving), and, when either network has a node besides the sensor, it starts at thermal rest "
+                 "(the prediction starts from the network's equilibrium); a term whose pooled held-out RMSE there is "
+                 "higher with it than without, by more than the noise of one reading, is withdrawn; a tie, or no "
+                 "segment able to judge, is no evidence against it: it stands on the in-sample test and "
+                 "not_determinable says so; validation: the segments every chosen term was judged on")
 _CASING_KEYS = ("winding_capacity_j_per_k", "casing_capacity_j_per_k", "winding_casing_k_per_w", "casing_ambient_k_per_w")
 
 
@@ -307,22 +321,53 @@ class _Fitter:
         chosen = range(len(folds)) if segments is None else segments
         return float(np.sqrt(np.mean(np.concatenate([folds[r] for r in chosen]) ** 2)))
 
-    def covered(self, term: str, r: int) -> bool:
-        """Segment ``r`` can judge ``term`` held out: the other segments hold at least as many samples (a fit
-        of less data than it predicts extrapolates) and, when the term is driven by speed, reach its speeds
-        (95th percentile of |v|: a fit of standing recordings says nothing about motion)."""
+    def covered(self, r: int) -> str:
+        """Why a fit of the other segments extrapolates to segment ``r`` ('' when it does not): they must hold at
+        least as many samples, reach its speeds (95th percentile of |v|), and hold at least ``min_samples`` of
+        every operating regime (at rest, loaded at rest, moving) it holds that many of."""
+        grid, s, least = self.grids[r], self.settings.regimes, self.settings.min_samples
         others = [g for k, g in enumerate(self.grids) if k != r]
-        if sum(len(g) for g in others) < len(self.grids[r]):
-            return False
-        top = [float(np.percentile(np.abs(g.velocity), 95)) for g in others]
-        return term not in SPEED_TERMS or float(np.percentile(np.abs(self.grids[r].velocity), 95)) <= max(top)
+        if sum(len(g) for g in others) < len(grid):
+            return f"the other segments hold fewer samples than {grid.name}"
+        if _p95(grid.velocity) > max(_p95(g.velocity) for g in others):
+            return f"the other segments do not reach the speeds of {grid.name}"
+        mine, theirs = _operating(grid, s), np.sum([_operating(g, s) for g in others], axis=0)
+        unseen = [name for name, n, m in zip(("at rest", "loaded at rest", "moving"), mine, theirs) if n >= least > m]
+        return f"the other segments hold no {'/'.join(unseen)} stretch like {grid.name}'s" if unseen else ""
 
-    def held_out(self, term: str, with_term: frozenset, without: frozenset) -> tuple[float, float] | None:
-        """Leave-one-segment-out RMSE of both sets over the segments that can judge ``term`` (None: none, or
-        no usable fold fit of either set)."""
-        segments = [r for r in range(len(self.grids)) if self.covered(term, r)]
-        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without)) if segments else ()
-        return scores if any(map(math.isfinite, scores)) else None
+    def unsettled(self, r: int) -> str:
+        """Why segment ``r`` does not start at thermal rest ('' when it does: its temperature trend at the start
+        within the regimes' ``trend_k_per_h``).  A fold predicts it from the network's equilibrium under its
+        first inputs: an unmeasured node then starts wherever that equilibrium puts it, not where it was."""
+        grid, s = self.grids[r], self.settings.regimes
+        trend = 3600.0 * abs(float(local_slope(grid.time_s, grid.measured_c, s.trend_window_s)[0]))
+        return f"{grid.name} starts {trend:.2g} K/h away from rest" if trend > s.trend_k_per_h else ""
+
+    def held_out(self, term: str, with_term: frozenset, without: frozenset) -> HeldOutCheck:
+        """Leave-one-segment-out RMSE of both sets pooled over the segments that can judge: covered
+        (:meth:`covered`) and, when either network has a node besides the sensor, settled at the start
+        (:meth:`unsettled`); differences within the noise of one reading of the set with the term are ties."""
+        hidden = any(len(self.model(terms).nodes) > 1 for terms in (with_term, without))
+        why = {r: self.covered(r) or (self.unsettled(r) if hidden else "") for r in range(len(self.grids))}
+        segments = [r for r, reason in why.items() if not reason]
+        if not segments:
+            return HeldOutCheck(term, undecided="; ".join(why.values()))
+        scores = tuple(self.segment_rmse(terms, segments) for terms in (with_term, without))
+        if not all(map(math.isfinite, scores)):
+            return HeldOutCheck(term, undecided="a fit of the other segments did not converge")
+        tie = _noise(self.fits[with_term], self.grids, self.settings.localise.noise_window_s).total_c
+        return HeldOutCheck(term, *scores, tie, tuple(self.grids[r].name for r in segments))
+
+
+def _p95(values: np.ndarray) -> float:
+    return float(np.percentile(np.abs(values), 95))
+
+
+def _operating(grid: ThermalGrid, settings: ThermalRegimeSettings) -> np.ndarray:
+    """Samples at rest, loaded at rest and moving (the regimes' current and speed thresholds)."""
+    moving = np.abs(grid.velocity) > settings.moving_rad_s
+    loaded = ~moving & (np.abs(grid.current_a) > settings.load_a)
+    return np.array([np.sum(~moving & ~loaded), np.sum(loaded), np.sum(moving)])
 
 
 def _labels(fit: ThermalFit) -> np.ndarray:
@@ -500,13 +545,12 @@ class ThermalDiagnosis:
                                  "rmse_before": self.cv_rmse[0], "rmse_after": self.cv_rmse[1]}
         if self.segment_cv is not None:
             out["validation"]["leave_one_segment_out"] = {
-                "method": "each segment (recording or stretch between gaps) predicted from its first measurement "
-                          "by a fit of the other segments; a term is named only if it lowers this held-out RMSE "
-                          "(judged on segments the others outnumber in samples and, for a speed-driven term, "
-                          "reach in speed)",
+                "method": HELD_OUT_RULE,
                 "segments": list(self.segment_cv[2]), "rmse_before": self.segment_cv[0], "rmse_after": self.segment_cv[1],
-                "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "named": t in self.missing_physics}
-                          for t, c in self.held_out.items()}}
+                "terms": {t: {"rmse_with": c.with_term, "rmse_without": c.without, "verdict": c.verdict,
+                              "tie_c": c.tie_c, "named": t in self.missing_physics}
+                          for t, c in self.held_out.items() if c.verdict != "undecided"},
+                "undecided": {t: c.undecided for t, c in self.held_out.items() if c.verdict == "undecided"}}
         return out
 
     def report(self) -> str:
@@ -526,6 +570,9 @@ class ThermalDiagnosis:
                   f"{len(self.localisations[1].mismatches)} unexplained intervals"]
         if self.segment_cv is not None:
             lines.append(f"leave one segment out: held-out rmse {self.segment_cv[0]:.4g} -> {self.segment_cv[1]:.4g} K")
+        if self.held_out:
+            lines += [f"  held out, {t}: {c.verdict}, {c}" for t, c in sorted(self.held_out.items())]
+            lines.append(f"  rule: {HELD_OUT_RULE}")
         lines.append(final.fit_report())
         return "\n".join(lines)
 
@@ -604,12 +651,22 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
     return out
 
 
-def _withdrawn(checks: Mapping[str, HeldOutCheck]) -> list[dict]:
-    """Terms the fit of every segment wanted that a held-out segment does not confirm: not claimed."""
-    return [{"term": t, "experiment": EXPERIMENTS[t],
-             "reason": f"lowers the residual of the data it is fitted on, not the error on unseen data (leave one "
-                       f"segment out: {c}): not claimed, and not in the final model"}
-            for t, c in sorted(checks.items()) if not c.improves]
+def _held_out_notes(checks: Mapping[str, HeldOutCheck], named: frozenset) -> list[dict]:
+    """Terms a held-out segment predicts worse with than without: withdrawn, not claimed.  Named terms the
+    held-out segments could not judge (undecided, or a tie within the noise): claimed on the in-sample test
+    alone, and said so."""
+    out = []
+    for t, c in sorted(checks.items()):
+        if c.withdraws:
+            reason = (f"lowers the residual of the data it is fitted on, not the error on unseen data (leave one "
+                      f"segment out: {c}): not claimed, and not in the final model")
+        elif t in named and not c.improves:
+            reason = (f"named on the in-sample test alone: leaving one segment out cannot confirm it ({c}); "
+                      "nothing held out speaks against it either")
+        else:
+            continue
+        out.append({"term": t, "reason": reason, "experiment": EXPERIMENTS[t]})
+    return out
 
 
 def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
@@ -695,8 +752,9 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
         if selection is not None:
             fitter.polish(selection.chosen.terms)
             cv = (fitter.cv_rmse(base), fitter.cv_rmse(selection.chosen.terms))
-            judged = [r for r in range(len(grids)) if all(fitter.covered(t, r) for t in selection.chosen.terms)]
-            if several and judged:
+            judged = [r for r, g in enumerate(grids) if all(g.name in c.segments for c in held_out.values()
+                                                              if c.term in selection.chosen.terms)]
+            if several and judged:  # the segments every chosen term was judged on (all when none was)
                 segment_cv = (fitter.segment_rmse(base, judged), fitter.segment_rmse(selection.chosen.terms, judged),
                               tuple(grids[r].name for r in judged))
     fits = dict(fitter.fits)
@@ -721,7 +779,8 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                     "network does (a wrong column or a broken sensor?); nothing here can be diagnosed")
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise,
-                            tuple(skipped) + tuple(unresolved) + tuple(_withdrawn(held_out))
+                            tuple(skipped) + tuple(unresolved)
+                            + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
                             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)),
                             settings.cv_blocks, hosted, base, held_out, segment_cv)
 
