@@ -1,7 +1,7 @@
 """Benchmark the DDP backends (codegen C, CasADi VM, numpy) against IPOPT.
 
 Cases (medians over repeated runs, written to benchmarks/results/ddp_backends.json):
-1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (thermo_ddp.studies.thermal_pendulum, also used by
+1. mpc: warm MPC re-solves of the 5-state thermal pendulum toy (thermo_ddp.testing.thermal_pendulum, also used by
    tests/test_ddp_vs_ipopt.py; n_thermal=3), N=200, winding limit and voltage limit active; closed loop over
    ``--mpc-steps`` steps, each warm-started from the shifted previous solution; IPOPT is
    warm-started the same way (primal + dual). Ratio ipopt / ddp per step.
@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 
 from _common import write
-from thermo_ddp.studies.thermal_pendulum import T_AMB, thermal_pendulum
+from thermo_ddp.testing.thermal_pendulum import T_AMB, thermal_pendulum
 from thermo_ddp.ocp import Cost, OptimalControlProblem
 from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, WarmStart
 

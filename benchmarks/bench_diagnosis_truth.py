@@ -1,6 +1,6 @@
 """Diagnosis against truths it does not share: detection and false-alarm rates, per-term confusion.
 
-Each case is a randomised three-node truth (``thermo_ddp.studies.testbed.truths``: its own numpy
+Each case is a randomised three-node truth (``thermo_ddp.testing.testbed.truths``: its own numpy
 network and matrix-exponential integrator, friction heat split between winding and casing, a drive
 node losing heat to casing and ambient; values +-30 %), a random concealed subset of
 friction_heating / drive_heating / casing_node (none included), sensor noise 0.02-0.1 K,
@@ -30,7 +30,7 @@ CASE_SEED = 50_000
 
 def run_case(seed: int) -> dict:
     from thermo_ddp.diagnose.thermal import diagnose_thermal
-    from thermo_ddp.studies.testbed.truths import random_case
+    from thermo_ddp.testing.testbed.truths import random_case
 
     rec, truth = random_case(CASE_SEED + seed)
     start = time.perf_counter()

@@ -28,8 +28,8 @@ import numpy as np
 from _common import median_time, write
 from thermo_ddp.diagnose.thermal import diagnose_thermal
 from thermo_ddp.identify.thermal import identify_thermal
-from thermo_ddp.studies.testbed import EFFECTS, PlantParameters, biceps, random_recording, static_4a
-from thermo_ddp.studies.testbed.experiments import random_ambient, random_sensors
+from thermo_ddp.testing.testbed import EFFECTS, PlantParameters, biceps, random_recording, static_4a
+from thermo_ddp.testing.testbed.experiments import random_ambient, random_sensors
 
 SPECIFIC = ("friction_heating", "drive_heating")
 NEVER_TRUE = ("copper_resistance", "iron_losses")

@@ -64,7 +64,7 @@ def test_bad_csv_names_file_column_and_row(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def drive_heated_csvs(tmp_path_factory):
     """Two short recordings of the simulated elbow whose drive heats the motor (hidden from the model)."""
-    from thermo_ddp.studies.testbed import PlantParameters, static_3a, static_4a
+    from thermo_ddp.testing.testbed import PlantParameters, static_3a, static_4a
 
     plant = PlantParameters().with_effects("drive")
     folder = tmp_path_factory.mktemp("thermal")
@@ -151,7 +151,7 @@ def test_write_model_equal_to_an_input_is_refused_before_work(tmp_path, capsys):
 
 @pytest.mark.parametrize("verb", ["identify", "diagnose", "validate"])
 def test_missing_column_unknown_key_and_empty_cells_one_line_each(verb, tmp_path, capsys):
-    model = ["--model", str(ROOT / "src" / "thermo_ddp" / "models" / "ur3_joint.toml")]
+    model = ["--model", str(ROOT / "models" / "ur3_joint.toml")]
     missing = tmp_path / "missing.toml"
     missing.write_text('[time]\ncolumn = "Timestamp"\n[columns]\ntemperature_c = "Temperature_J9"\n'
                        'current_a = "Current_J1"\n[rows]\nskip_incomplete = true\n')

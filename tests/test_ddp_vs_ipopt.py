@@ -1,6 +1,6 @@
 """DDP against IPOPT (and fatrop) on a small thermal pendulum resembling the elbow lift.
 
-Toy model (thermo_ddp.studies.thermal_pendulum, not the robot): a 1-DOF pendulum driven by a current u,
+Toy model (thermo_ddp.testing.thermal_pendulum, not the robot): a 1-DOF pendulum driven by a current u,
 torque = k u - m g l sin(q) - b v, and a one-node winding temperature
 C T' = R0 (1 + alpha (T - Ta)) u^2 - (T - Ta) / Rth. Constraints: T <= Tmax and the
 voltage |R(T) u + kb v| <= Vmax, box |u| <= umax. Goal: lift to the angle given as a
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from thermo_ddp.studies.thermal_pendulum import thermal_pendulum, x0_of
+from thermo_ddp.testing.thermal_pendulum import thermal_pendulum, x0_of
 from thermo_ddp.solvers import DDPSettings, DDPSolver, IpoptSolver, FatropSolver, WarmStart
 
 GOAL = np.minimum(np.linspace(0.0, 4.0, 101), 2.0)[:, None]  # ramp to 2 rad, then hold

@@ -17,8 +17,8 @@ from thermo_ddp.errors import InputError
 from thermo_ddp.identify.thermal import load_joint_parameters
 from thermo_ddp.model.parameters import parameters_from_dict
 from thermo_ddp.recordings import Recording
-from thermo_ddp.studies.testbed import PlantParameters, biceps, static_3a, static_4a
-from thermo_ddp.studies.testbed.truths import ThreeNodeTruth, record
+from thermo_ddp.testing.testbed import PlantParameters, biceps, static_3a, static_4a
+from thermo_ddp.testing.testbed.truths import ThreeNodeTruth, record
 
 CONTRACT_KEYS = {"success", "status", "message", "physics", "recordings", "rows", "baseline", "mismatches",
                  "missing_physics", "not_determinable", "final", "validation", "unexplained"}
@@ -221,7 +221,7 @@ def test_a_true_casing_node_is_not_withdrawn_on_evidence_that_is_not_against_it(
     50044: the first stretch's loaded hold was predicted by a fit of a stretch that never holds a load
     (2.3 K with, 0.35 K without): no segment can judge.  The casing node is named; a tie or an undecided
     check says in not_determinable that it stands on the in-sample test."""
-    from thermo_ddp.studies.testbed.truths import random_case
+    from thermo_ddp.testing.testbed.truths import random_case
 
     d = diagnose_thermal(random_case(seed)[0])
     check = d.held_out["casing_node"]
@@ -289,7 +289,7 @@ def test_without_a_room_thermometer_a_steady_heat_is_the_rooms_stand_in_not_a_cl
     """The drive's steady heat on a one-node model is the same as a warmer room: with ambient_c logged the
     diagnosis names it; without, it fits it in every model (so the fit holds) but names nothing for it and
     says why, with the experiment that would tell."""
-    from thermo_ddp.studies.testbed import COLUMNS, PlantParameters, static_3a
+    from thermo_ddp.testing.testbed import COLUMNS, PlantParameters, static_3a
 
     rec = static_3a(params=PlantParameters().with_effects("drive"), heating_s=1800.0, cooling_s=1800.0)
     logged = diagnose_thermal(rec.to_csv(tmp_path / "logged.csv"))

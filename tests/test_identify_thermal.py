@@ -13,7 +13,7 @@ from thermo_ddp.identify.thermal import (ThermalModel, ThermalSettings, identify
                                          load_joint_parameters, thermal_grid)
 from thermo_ddp.model.parameters import parameters_from_dict
 from thermo_ddp.recordings import Recording
-from thermo_ddp.studies.testbed import Ambient, PlantParameters, SensorSettings, static_3a, static_4a, static_hold
+from thermo_ddp.testing.testbed import Ambient, PlantParameters, SensorSettings, static_3a, static_4a, static_hold
 from thermo_ddp.model.thermal import one_node_response
 
 # winding glued to the casing: the plant is a one-node network (testbed's own oracle test uses 1e-4)
@@ -173,7 +173,7 @@ def test_voltage_thermometry_pins_the_winding_node_down():
     """Known parameters (two-node plant, nothing concealed): with the motor voltage as a winding
     thermometer the winding capacity and resistance come out closer to the truth and with smaller
     standard errors than from the casing sensor alone; a one-node model ignores the voltage."""
-    from thermo_ddp.studies.testbed import LOGGED_COLUMNS, winding_pulses
+    from thermo_ddp.testing.testbed import LOGGED_COLUMNS, winding_pulses
     plant = PlantParameters(friction_heating=False, drive_heating=False)
     recs = [static_4a(params=plant, heating_s=1800.0, cooling_s=1800.0, seed=21), winding_pulses(params=plant, seed=22)]
     casing = identify_thermal([r.to_recording() for r in recs], "two_node")
@@ -190,7 +190,7 @@ def test_voltage_thermometry_pins_the_winding_node_down():
 
 
 def test_thermometry_uses_only_loaded_and_still_samples():
-    from thermo_ddp.studies.testbed import LOGGED_COLUMNS, biceps
+    from thermo_ddp.testing.testbed import LOGGED_COLUMNS, biceps
     rec = biceps(heating_s=600.0, cooling_s=600.0, seed=3).to_recording(LOGGED_COLUMNS)
     grid = thermal_grid(rec, ELBOW)
     used = grid.winding_weight > 0

@@ -25,8 +25,8 @@ from thermo_ddp.studies.loop import (LoopSettings, claim, loop_files, mpc_settin
 from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
 from thermo_ddp.mpc.plant import Measurement
 from thermo_ddp.model.parameters import load_parameters
-from thermo_ddp.studies.testbed import JOINT, PlantParameters, steady_state
-from thermo_ddp.studies.testbed.physics import thermal_network
+from thermo_ddp.testing.testbed import JOINT, PlantParameters, steady_state
+from thermo_ddp.testing.testbed.physics import thermal_network
 
 def load_column_map_text(text: str):
     return column_map_from_dict(tomllib.loads(text), "robot_log.toml")

@@ -102,7 +102,7 @@ def test_cli_sweep_bad_input_is_one_line_exit_2(argv, field, tmp_path, capsys):
 @pytest.fixture(scope="module")
 def fleet_csvs(tmp_path_factory):
     """Two robots' recordings: one whose drive heats the motor (concealed from the model), one without."""
-    from thermo_ddp.studies.testbed import PlantParameters, static_3a
+    from thermo_ddp.testing.testbed import PlantParameters, static_3a
 
     folder = tmp_path_factory.mktemp("fleet")
     paths = []

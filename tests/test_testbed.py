@@ -10,10 +10,10 @@ import pytest
 from scipy.linalg import expm
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.studies.testbed import (COLUMNS, Ambient, PlantParameters, SensorSettings, biceps, random_campaign,
+from thermo_ddp.testing.testbed import (COLUMNS, Ambient, PlantParameters, SensorSettings, biceps, random_campaign,
                                 random_recording, simulate, static_4a, static_hold)
-from thermo_ddp.studies.testbed.physics import Phase, Profile, curl, hold
-from thermo_ddp.studies.testbed.sensors import sample_times
+from thermo_ddp.testing.testbed.physics import Phase, Profile, curl, hold
+from thermo_ddp.testing.testbed.sensors import sample_times
 
 NOISELESS = SensorSettings().noiseless()
 
@@ -293,7 +293,7 @@ def test_bad_settings_are_input_errors():
 def test_logged_voltage_is_the_resistance_law_of_the_true_winding(tmp_path):
     """voltage_v = R_ref (1 + alpha (T_w - T_ref)) i + K_m N v, evaluated here from the hidden truth
     (noiseless sensors), and it is written only when asked for."""
-    from thermo_ddp.studies.testbed import LOGGED_COLUMNS, winding_pulses
+    from thermo_ddp.testing.testbed import LOGGED_COLUMNS, winding_pulses
     p = PlantParameters()
     rec = winding_pulses(params=p, pulses=1, cooling_s=600.0, sensors=SensorSettings().noiseless(), seed=1)
     t, c = rec.truth, rec.columns
@@ -307,7 +307,7 @@ def test_logged_voltage_is_the_resistance_law_of_the_true_winding(tmp_path):
 
 
 def test_winding_pulses_excite_the_winding_and_stay_under_the_cut_off():
-    from thermo_ddp.studies.testbed import winding_pulses
+    from thermo_ddp.testing.testbed import winding_pulses
     rec = winding_pulses(seed=2)
     t = rec.truth
     start, end = t.phase("pulse_1")

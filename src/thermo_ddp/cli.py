@@ -203,7 +203,7 @@ def _result(data: dict, out: Outputs, stdout: bool = True) -> int:
 def _outputs(args) -> Outputs:
     """Every output of ``args`` checked against every input (the packaged parameter files included: the
     default models) and each other, before any work."""
-    inputs = sorted(Path(str(resources.files("thermo_ddp").joinpath("models"))).glob("*.toml"))  # default models
+    inputs = sorted(Path(str(resources.files("thermo_ddp.models"))).glob("*.toml"))  # default models
     for name in INPUT_ARGS:
         value = getattr(args, name, None)
         inputs += list(value) if isinstance(value, (list, tuple)) else [value] if value else []

@@ -306,8 +306,9 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
 
 
 def packaged_parameter_file(name: str) -> Path:
-    """The parameter file ``<name>.toml`` shipped with the package (``thermo_ddp/models/``)."""
-    path = Path(str(resources.files("thermo_ddp").joinpath("models", f"{name}.toml")))
+    """The parameter file ``<name>.toml`` shipped with the package (package data ``thermo_ddp.models``, whose
+    one source is the repository's top-level ``models/``)."""
+    path = Path(str(resources.files("thermo_ddp.models").joinpath(f"{name}.toml")))
     if not path.is_file():
         shipped = sorted(p.stem for p in path.parent.glob("*.toml"))
         raise InputError("thermo_ddp/models", "name", name, f"no packaged parameter file; shipped: {', '.join(shipped)}")

@@ -1,7 +1,7 @@
 """Close the loop: robot recordings -> identification -> diagnosis -> improved model -> plan ->
 receding-horizon execution on the robot, for the report's ORIGINAL model and the IMPROVED one.
 
-The "robot" is the testbed's simulated elbow (``thermo_ddp.studies.testbed``) with its concealed physics on:
+The "robot" is the testbed's simulated elbow (``thermo_ddp.testing.testbed``) with its concealed physics on:
 friction heating and drive heat. It "records" the seed report's three experiments (section 4.3) and a
 winding pulse test, with its motor voltage logged; the tool identifies the report's one-node model
 (the ORIGINAL: eq. 7 with R(T), constant ambient, no friction heat), diagnoses the misfit, fits the
@@ -50,7 +50,7 @@ from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
                                 save_parameters)
-from .testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
+from ..testing.testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
 from .._figures import new_figure
@@ -74,7 +74,7 @@ class LoopSettings:
     terminal return constraint contradicts the hold band), sensor ``seed``. ``oracle``: also plan and
     execute with the robot's true parameter file (the best any identified model can do).
 
-    ``pulse_test``: also record :func:`~thermo_ddp.studies.testbed.winding_pulses` (not in the report), which
+    ``pulse_test``: also record :func:`~thermo_ddp.testing.testbed.winding_pulses` (not in the report), which
     excites the winding's time constant. ``voltage``: the robot logs its motor voltage; the
     identification uses it as a winding thermometer and the improved model's observer measures it.
     The original model (the diagnosis' one-node baseline, fitted to the same recordings; one node has no
@@ -157,7 +157,7 @@ def truth_parameters(robot: PlantParameters, base: JointParameters | None = None
     data = base.to_dict()
     data["motor"].update(motor)
     data["thermal"] = thermal
-    data["sources"] = {"truth": "thermo_ddp.studies.testbed PlantParameters of the simulated robot (hidden from the tool); "
+    data["sources"] = {"truth": "thermo_ddp.testing.testbed PlantParameters of the simulated robot (hidden from the tool); "
                                 f"friction heat split {r.friction_to_winding:g} winding / "
                                 f"{1 - r.friction_to_winding:g} casing"}
     return parameters_from_dict(data, "testbed truth")
