@@ -125,6 +125,16 @@ def test_steady_state_of_a_hand_built_network_is_the_resistor_network_answer():
     np.testing.assert_allclose(net.steady_state({}, 20.0), [tw, tt, ty], rtol=1e-12)
 
 
+def test_a_symbolic_iron_exponent_has_a_finite_derivative_at_rest():
+    params = _params(NETWORK)
+    n = ca.SX.sym("n")
+    sym = params.with_values({"thermal.source.iron_losses.speed_exponent": n})
+    from thermo_ddp.model.thermal import joint_heat_rhs
+    rhs = joint_heat_rhs(network_from_parameters(sym.thermal), sym.motor, np.full(4, 50.0), 10.0, 0.0, 30.0)
+    grad = np.array(ca.Function("g", [n], [ca.jacobian(rhs, n)])(1.6), float)
+    assert np.all(np.isfinite(grad))
+
+
 def test_symbols_at_dotted_paths_differentiate_the_same_rhs():
     params = _params(NETWORK)
     paths = ("thermal.node.tooth.capacity_j_per_k", "thermal.link.tooth-winding.resistance_k_per_w",
