@@ -130,6 +130,7 @@ def test_cli_validate_reports_scope_keys_and_says_when_outside(tmp_path, synthet
     assert {"per_sensor", "envelope", "alternatives", "band_k"} <= set(d)
     assert d["envelope"]["outside"] and d["envelope"]["quantities"]["current_a"]["here"] == [6.0, 18.0]
     assert set(d["per_sensor"]) == {"winding", "tooth", "yoke"} and d["band_k"] == 0.0
+    assert d["envelope"]["known"] and not validate_thermal([rec], _params()).to_dict()["envelope"]["known"]
     assert "used where it was never identified: current_a" in capsys.readouterr().out
 
 
