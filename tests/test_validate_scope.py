@@ -153,3 +153,9 @@ def test_paderborn_profile_60_lies_outside_a_file_identified_on_profile_24(tmp_p
     assert q["ambient_c"]["above_by"] > 45.0 and q["current_a"]["above_by"] > 60.0
     assert "ambient_c" in d["message"] and "never identified" in d["message"]
     assert set(d["per_sensor"]) == {"winding"}  # a one-node file: tooth and yoke are no nodes of it
+
+
+def test_the_plot_draws_every_measured_node(tmp_path, synthetic):
+    result = validate_thermal([_recording(synthetic)], _params())
+    fig = result.plot(tmp_path / "v.png")
+    assert fig.stat().st_size > 10_000
