@@ -61,6 +61,9 @@ log = logging.getLogger(__name__)
 _SRC = "loop"
 MODELS = ("original", "improved")
 ORACLE = "truth"  # the robot's own parameter file as the planner's model: what perfect knowledge achieves
+# LoopSettings.short(): 30-minute experiments, a 45 s hold (still longer than the robot can hold 40 kg under
+# 140 °C) and no oracle
+SHORT_DEFAULTS = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
 
 
 # ----------------------------------------------------------------------------- settings
@@ -109,10 +112,8 @@ class LoopSettings:
 
     @classmethod
     def short(cls, **options) -> "LoopSettings":
-        """Short experiments (30 min heating and cooling), a 45 s requested hold (still longer than the
-        robot can hold 40 kg under 140 °C) and no oracle, for tests and the notebook's quick run."""
-        defaults = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
-        return settings_from_mapping(cls, defaults | options, _SRC)
+        """:data:`SHORT_DEFAULTS` (overridden by ``options``), for tests and the notebook's quick run."""
+        return settings_from_mapping(cls, SHORT_DEFAULTS | options, _SRC)
 
     @property
     def models(self) -> tuple[str, ...]:
