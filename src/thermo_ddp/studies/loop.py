@@ -43,6 +43,7 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError, RunFailed
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
+from ..diagnose.figure import plot_thermal_diagnosis
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
 from ..tasks._common import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
@@ -550,7 +551,7 @@ def _write_loop(settings: LoopSettings, folder: Path, final: Path, cmap: ColumnM
     """The run's files into ``folder``; paths in the table name ``final``, where the folder will be."""
     result = run_loop(settings, folder, cmap)
     (folder / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
-    result.diagnosis.plot(folder / "diagnosis.png")
+    plot_thermal_diagnosis(result.diagnosis, folder / "diagnosis.png")
     result.plot(folder / "loop.png")
     result.plot_summary(folder / "loop_summary.png")
     table = result.to_dict()
