@@ -55,6 +55,7 @@ from ..testing.testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
 from .._figures import new_figure
+from .._progress import hidden
 from ..outputs import check_output_folder, write_folder_atomically
 from ..recordings import ColumnMap, load_column_map, read_recordings
 
@@ -318,7 +319,15 @@ class LoopResult:
                           f"diagnosis: {d['baseline_model']} -> {d['final_model']}, missing physics "
                           f"{', '.join(d['missing_physics']) or 'none'}, held-out rmse {d['rmse_before']:.3f} -> "
                           f"{d['rmse_after']:.3f} K", self.parameter_table(), self.table(),
-                          *(c["statement"] for c in self.claims())])
+                          *(c["statement"] for c in self.claims()), *self.fallback_lines()])
+
+    def fallback_lines(self) -> list[str]:
+        """Periods whose re-solve failed or came late (the previous plan's control was applied), per run."""
+        counts = {f"{r['model']} {r['limit_c']:g} °C": r["fallback_periods"] for r in self.rows() if r["fallback_periods"]}
+        if not counts:
+            return []
+        return ["re-solves that failed or came late (the previous plan's control applied): "
+                + ", ".join(f"{k}: {n}" for k, n in counts.items())]
 
     def parameter_table(self) -> str:
         """The improved model's thermal parameters (± standard error) next to the robot's hidden values."""
@@ -421,6 +430,8 @@ def plot_summary(result: LoopResult, path: Path) -> Path:
     ax[1].bar(x, margins, color=["tab:red" if m < 0 else _COLORS[r["model"]] for m, r in zip(margins, rows)])
     ax[1].axhline(0.0, c="k", lw=0.8)
     ax[1].set(ylabel="limit - peak TRUE winding [K] (< 0: limit broken)")
+    ax[1].set_title("margin to the limit")
+    ax[0].set_title("hold")
     for a in ax:
         a.set_xticks(x, labels)
         a.grid(alpha=0.3, axis="y")
@@ -500,25 +511,43 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
         check_idle_below_limits(elbow, {ELBOW: lim})
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
-    recordings = record_experiments(robot, settings)
-    files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
-                  for r in recordings)
-    sources = files if cmap is None else read_recordings(files, cmap).recordings
-    diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
-    save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
-    plant_model = truth_model(robot, settings.payload_kg)
-    executions = []
-    if settings.oracle:
-        model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
     cases = [(m, lim) for m in settings.models for lim in settings.limits_c]
-    show = bool(settings.progress)
-    for model, lim in tqdm(cases, desc="plan and execute", unit="case", disable=not show):
-        plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_files[model]))
-        run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model], model), show)
-        log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
-                 run.achieved_hold_s, run.margin_c)
-        executions.append(Execution(model=model, limit_c=lim, plan=plan, run=run))
+    with tqdm(total=2 + len(cases), desc="loop", unit="step", disable=hidden(settings.progress)) as bar:
+        _stage(bar, "recording the experiments on the simulated robot")
+        recordings = record_experiments(robot, settings)
+        files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
+                      for r in recordings)
+        sources = files if cmap is None else read_recordings(files, cmap).recordings
+        _stage(bar, "diagnosing and re-identifying", done=True)
+        diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
+        save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
+        if settings.oracle:
+            model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
+        plant_model = truth_model(robot, settings.payload_kg)
+        executions = []
+        for model, lim in cases:
+            _stage(bar, f"plan and closed loop: {model} model, {lim:g} °C", done=True)
+            executions.append(_plan_and_execute(settings, plant_model, model_files[model], model, lim))
+        bar.update()
     return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
+
+
+def _stage(bar, what: str, done: bool = False) -> None:
+    """The loop's progress: the stage that starts now (``done``: the previous one ended), a line with -v."""
+    if done:
+        bar.update()
+    bar.set_postfix_str(what)
+    log.info("loop: %s", what)
+
+
+def _plan_and_execute(settings: LoopSettings, plant_model: ActuatedArm, model_file: Path, model: str,
+                      lim: float) -> Execution:
+    """One model under one limit: the open-loop plan and its closed loop on the robot's true physics."""
+    plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_file))
+    run = execute(model_file, plant_model, mpc_settings(settings, lim, model_file, model))
+    log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
+             run.achieved_hold_s, run.margin_c)
+    return Execution(model=model, limit_c=lim, plan=plan, run=run)
 
 
 def _log(recording: SimulatedRecording, path: Path, logged: tuple[str, ...], cmap: ColumnMap | None) -> Path:

@@ -186,9 +186,9 @@ class SweepResult:
         done = [r for r in self.runs if "error" not in r]
         fig, (a, b) = new_figure(1, 2, (9, 3.5))
         a.hist([r["margin_c"] for r in done], bins=20, color="tab:blue")
-        a.set(xlabel="margin under the winding limit, K", ylabel="runs", title="true winding margin")
-        b.hist([r["hold_ratio"] for r in done if r["hold_ratio"] is not None], bins=20, color="tab:green")
-        b.set(xlabel="hold / nominal hold", title="hold achieved")
+        a.set(xlabel="margin under the winding limit [K]", ylabel="runs [count]", title="true winding margin")
+        b.hist([100 * r["hold_ratio"] for r in done if r["hold_ratio"] is not None], bins=20, color="tab:green")
+        b.set(xlabel="hold achieved / nominal hold [%]", ylabel="runs [count]", title="hold achieved")
         fig.tight_layout()
         fig.savefig(path, dpi=120)
 
