@@ -136,7 +136,8 @@ def loop_parser() -> Parser:
                           f"{SHORT_DEFAULTS['hold_s']:g} s with --short)")
     cmd.add_argument("--limits-c", type=number("°C"), nargs="+", default=list(LoopSettings.limits_c),
                      help=f"winding limits in °C (default {' '.join(f'{c:g}' for c in LoopSettings.limits_c)} °C)")
-    cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters")
+    cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters "
+                                                              "(--short skips it anyway)")
     cmd.add_argument("--columns", metavar="MAP.toml", help="column map: the robot logs its recordings in the map's own "
                                                            "column names and the chain reads them through it "
                                                            "(default: contract columns)")

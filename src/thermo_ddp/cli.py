@@ -77,10 +77,11 @@ def _compare(args, out: Outputs) -> Run:
 
 def _loop(args, out: Outputs) -> Run:
     from .studies.loop import loop_files
-    options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle, "columns": args.columns,
-               "progress": _progress(args)}
+    options = {"limits_c": tuple(args.limits_c), "columns": args.columns, "progress": _progress(args)}
     if args.hold_s is not None:
         options["hold_s"] = args.hold_s
+    if args.no_oracle:  # else the settings' default: with the true parameters, except --short
+        options["oracle"] = False
     table = loop_files(args.out, short=args.short, **options)
     report = (Path(args.out) / "loop.txt").read_text().rstrip("\n")
     files = f"  files in {args.out}/: loop.txt, loop.json, loop.png, loop_summary.png, diagnosis.json, diagnosis.png, " \

@@ -54,7 +54,6 @@ from ..model.parameters import (JointParameters, load_parameters, packaged_param
 from ..testing.testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
-from .._figures import new_figure
 from .._progress import hidden
 from ..outputs import check_output_folder, write_folder_atomically
 from ..recordings import ColumnMap, load_column_map, read_recordings
@@ -338,10 +337,12 @@ class LoopResult:
 
     def plot(self, path: str | Path) -> Path:
         """Per limit: true and estimated winding, current, measured casing, for both models."""
+        from .loop_figures import plot_loop
         return plot_loop(self, Path(path))
 
     def plot_summary(self, path: str | Path) -> Path:
         """Bars: planned and executed hold, margin to the limit, per model and limit."""
+        from .loop_figures import plot_summary
         return plot_summary(self, Path(path))
 
 
@@ -382,63 +383,6 @@ def oracle_claim(improved: dict[str, Any], truth: dict[str, Any]) -> dict[str, A
         text += f" (the improved model gets {100 * share:.0f} % of that hold)"
     return {"oracle_hold_s": truth["closed_loop_hold_s"], "oracle_margin_c": truth["margin_c"],
             "improved_hold_share_of_oracle": share, "statement": text}
-
-
-# ----------------------------------------------------------------------------- figures
-_COLORS = {"original": "tab:blue", "improved": "tab:green", ORACLE: "tab:gray"}
-
-
-def plot_loop(result: LoopResult, path: Path) -> Path:
-
-    limits = result.settings.limits_c
-    fig, axes = new_figure(3, len(limits), figsize=(7 * len(limits), 10), sharex="col", squeeze=False)
-    for c, lim in enumerate(limits):
-        ax = axes[:, c]
-        for model in result.settings.models:
-            e, color = result.execution(model, lim), _COLORS[model]
-            r = e.run
-            ax[0].plot(r.time_s, r.winding_c, c=color, label=f"{model}: true winding (peak {r.peak_winding_c:.1f} °C)")
-            ax[0].plot(r.time_s, r.estimated_winding_c, c=color, ls="--", label=f"{model}: planner's estimate")
-            ax[1].step(r.time_s[:-1], r.current_a, where="post", c=color,
-                       label=f"{model}: current (hold {r.achieved_hold_s:.1f} s)")
-            ax[2].plot(r.time_s, r.measured_casing_c, c=color, label=f"{model}: measured casing")
-        ax[0].axhline(lim, c="k", ls="--", label=f"winding limit {lim:g} °C")
-        ax[0].set(title=f"{result.settings.payload_kg:g} kg lift, winding limit {lim:g} °C (closed loop on the "
-                        "robot's true physics)", ylabel="winding [°C]")
-        ax[1].set(ylabel="current [A]")
-        ax[2].axhline(result.execution("improved", lim).run.safety_cutoff_c, c="r", ls=":", label="safety cut-off")
-        ax[2].set(ylabel="casing sensor [°C]", xlabel="time [s]")
-        for a in ax:
-            a.grid(alpha=0.3)
-            a.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    return path
-
-
-def plot_summary(result: LoopResult, path: Path) -> Path:
-
-    rows = result.rows()
-    labels = [f"{r['model']}\n{r['limit_c']:g} °C" for r in rows]
-    x = np.arange(len(rows))
-    fig, ax = new_figure(1, 2, figsize=(12, 4))
-    ax[0].bar(x - 0.2, [r["planned_hold_s"] for r in rows], 0.4, label="planned (open loop, model)")
-    ax[0].bar(x + 0.2, [r["closed_loop_hold_s"] for r in rows], 0.4, label="executed (closed loop, robot)")
-    ax[0].axhline(result.settings.hold_s, c="grey", ls=":", label="requested")
-    ax[0].set(ylabel="hold [s]")
-    margins = [r["margin_c"] for r in rows]
-    ax[1].bar(x, margins, color=["tab:red" if m < 0 else _COLORS[r["model"]] for m, r in zip(margins, rows)])
-    ax[1].axhline(0.0, c="k", lw=0.8)
-    ax[1].set(ylabel="limit - peak TRUE winding [K] (< 0: limit broken)")
-    ax[1].set_title("margin to the limit")
-    ax[0].set_title("hold")
-    for a in ax:
-        a.set_xticks(x, labels)
-        a.grid(alpha=0.3, axis="y")
-    ax[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    return path
 
 
 def identify_models(recording_files, out_dir: Path,
