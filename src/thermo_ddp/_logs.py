@@ -19,14 +19,25 @@ THIRD_PARTY = ("distributed", "dask", "bokeh", "tornado", "asyncio", "matplotlib
 _PROJECT_LEVELS = {-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO, 2: logging.DEBUG}
 
 
+class _Stderr(logging.StreamHandler):
+    """A handler on whatever ``sys.stderr`` is when a record comes (a caller may have replaced it since)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, _value) -> None:
+        pass
+
+
 def configure_logging(verbosity: int) -> None:
     """One handler on stderr (``name: message``) and the levels of ``verbosity`` (see the module docstring)."""
     verbosity = max(-1, min(2, verbosity))
     root = logging.getLogger()
-    if not any(getattr(h, "_thermo_ddp", False) for h in root.handlers):
-        handler = logging.StreamHandler(sys.stderr)
+    if not any(isinstance(h, _Stderr) for h in root.handlers):
+        handler = _Stderr()
         handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
-        handler._thermo_ddp = True  # type: ignore[attr-defined]
         root.addHandler(handler)
     root.setLevel(logging.DEBUG if verbosity >= 2 else logging.WARNING)
     logging.getLogger(PROJECT).setLevel(_PROJECT_LEVELS[verbosity])
