@@ -102,3 +102,31 @@ def test_verbosity_is_taken_anywhere(argv, level, rest):
 def test_quiet_after_the_command_is_accepted(capsys):
     assert main(["demo", "--payload-kg", "10", "-q"]) == 0
     assert "10 kg" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("verbosity, shown, hidden", [
+    (0, ["thermo_ddp.cli warn"], ["thermo_ddp.loop step", "thermo_ddp.solvers.ddp solve", "distributed.scheduler start"]),
+    (1, ["thermo_ddp.loop step", "thermo_ddp.solvers.ddp slow"], ["thermo_ddp.solvers.ddp solve",
+                                                                   "thermo_ddp.mpc.controller period",
+                                                                   "distributed.scheduler start"]),
+    (2, ["thermo_ddp.solvers.ddp solve", "thermo_ddp.mpc.controller period", "distributed.scheduler start"], []),
+    (-1, [], ["thermo_ddp.cli warn", "thermo_ddp.loop step"]),
+])
+def test_verbosity_levels_keep_per_solve_and_third_party_lines_out_unless_asked(verbosity, shown, hidden, capsys):
+    """-v shows the steps, not one line per solve or per control period; Dask speaks only with -vv."""
+    import logging
+
+    from thermo_ddp._logs import configure_logging
+    configure_logging(verbosity)
+    logging.getLogger("thermo_ddp.cli").warning("warn")
+    logging.getLogger("thermo_ddp.loop").info("step")
+    logging.getLogger("thermo_ddp.solvers.ddp").info("solve")
+    logging.getLogger("thermo_ddp.solvers.ddp").warning("slow")
+    logging.getLogger("thermo_ddp.mpc.controller").warning("period")
+    logging.getLogger("distributed.scheduler").info("start")
+    err = capsys.readouterr().err
+    configure_logging(0)
+    for line in shown:
+        assert line.replace(" ", ": ", 1) in err
+    for line in hidden:
+        assert line.replace(" ", ": ", 1) not in err
