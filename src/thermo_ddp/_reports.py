@@ -12,6 +12,7 @@ from typing import Iterable, Mapping
 MAX_LINES = 40
 
 # What each output option holds, for the closing "files:" lines.
+RMSE_UNITS = {"thermal": " K", "mechanical": " (effort: N·m or N)"}
 OUTPUT_NAMES = {"--json": "result JSON", "--plot": "figure", "--write-model": "parameter file"}
 
 
@@ -91,7 +92,8 @@ def identification_report(d: Mapping) -> str:
     """``thermo-ddp identify``: the model, its error and each parameter with its standard error and
     95 % interval."""
     lines = [_heading("identification", d), _rows(d),
-             f"  model {d.get('model', '?')}: rmse {_number(d.get('rmse'))} on {d.get('n_samples', '?')} samples"]
+             f"  model {d.get('model', '?')}: rmse {_number(d.get('rmse'), RMSE_UNITS.get(d.get('physics'), ''))} "
+             f"on {d.get('n_samples', '?')} samples"]
     params, stderr, ci = d.get("parameters") or {}, d.get("stderr") or {}, d.get("confidence_95") or {}
     if params:
         lines.append("  parameters (± standard error; 95 % interval):")
