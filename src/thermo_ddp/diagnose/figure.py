@@ -28,8 +28,8 @@ FONT = {"font.size": 10, "axes.titlesize": 10, "axes.labelsize": 10, "legend.fon
 def plot_thermal_diagnosis(diagnosis, path: str | Path, max_recordings: int = MAX_RECORDINGS) -> Path:
     """Write the figure of ``diagnosis`` (a :class:`~thermo_ddp.diagnose.thermal.ThermalDiagnosis`) to ``path``."""
     grids = diagnosis.grids[:max_recordings]
-    columns = max(1, min(len(grids), MAX_COLUMNS))
-    blocks = max(1, math.ceil(len(grids) / columns))
+    blocks = max(1, math.ceil(len(grids) / MAX_COLUMNS))
+    columns = max(1, math.ceil(len(grids) / blocks))  # four recordings: two by two
     with rc_context(FONT):
         fig, axes = new_figure(4 * blocks, columns, figsize=(COLUMN_IN * columns, PANEL_IN * 4 * blocks + 0.6),
                                squeeze=False)
@@ -43,7 +43,7 @@ def plot_thermal_diagnosis(diagnosis, path: str | Path, max_recordings: int = MA
         shown = f"all {len(diagnosis.grids)} recordings" if len(grids) == len(diagnosis.grids) else \
             f"the first {len(grids)} of {len(diagnosis.grids)} recordings (the JSON has every one)"
         fig.suptitle(f"thermal diagnosis: {diagnosis.status}; {shown}")
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / fig.get_figheight()))  # room for the title
         fig.savefig(path, dpi=DPI)
     return Path(path)
 
