@@ -1,6 +1,7 @@
 """Quiet runs: each command, run as a user runs it (a subprocess, the default verbosity), prints a readable
 report of at most 40 lines on stdout + stderr, with no Python warning, no traceback and no third-party log
 line (Dask's above all). Short settings keep it quick; the shipped simulated elbow recordings are the data."""
+import json
 import os
 import re
 import subprocess
@@ -45,7 +46,10 @@ def test_diagnose_identify_validate(folder):
 def test_plan_and_compare(folder):
     assert "140 °C" in run("plan", "--limit-c", "140", "--hold-s", "5", "--json", "p.json", cwd=folder)
     text = run("compare", "--hold-s", "10", "--json", "c.json", "--plot", "c.png", cwd=folder)
-    assert "84" in text and "140" in text and "c.json" in text
+    rows = json.loads((folder / "c.json").read_text())["rows"]
+    assert [r["limit_c"] for r in rows] == [84, 140] and "c.json" in text and "c.png" in text
+    for r in rows:  # the table printed is the JSON's
+        assert f"{r['hold_s']:7.1f} {r['peak_winding_c']:11.1f}" in text and r["status"]
 
 
 def test_loop_short(folder):

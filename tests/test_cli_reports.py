@@ -76,3 +76,10 @@ def test_the_shipped_recording_is_small_and_regenerates_byte_for_byte(tmp_path):
         shipped = ELBOW / written.name
         assert shipped.stat().st_size < 300_000
         assert written.read_bytes() == shipped.read_bytes()
+
+
+def test_mechanical_report_speaks_in_effort_units(emps_csv, capsys):
+    assert main(["diagnose", str(emps_csv), "--physics", "mechanical"]) == 0
+    out = capsys.readouterr().out
+    assert "coulomb_friction" in out and len(out.splitlines()) <= MAX_LINES
+    assert " K" not in out and "rmse" in out and "effort units" in out

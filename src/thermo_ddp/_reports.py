@@ -12,7 +12,7 @@ from typing import Iterable, Mapping
 MAX_LINES = 40
 
 # What each output option holds, for the closing "files:" lines.
-RMSE_UNITS = {"thermal": " K", "mechanical": " (effort: N·m or N)"}
+RMSE_UNITS = {"thermal": " K", "mechanical": " (effort units: N·m or N)"}  # what a residual is measured in
 OUTPUT_NAMES = {"--json": "result JSON", "--plot": "figure", "--write-model": "parameter file"}
 
 
@@ -47,9 +47,9 @@ def _rows(d: Mapping) -> str:
             f"{rows.get('segments', '?')} segment(s)")
 
 
-def _term_line(term: Mapping) -> str:
+def _term_line(term: Mapping, unit: str) -> str:
     values = ", ".join(f"{k} {_number(v, digits=4)}" for k, v in (term.get("parameters") or {}).items())
-    return (f"    {term['term']:<18} changes the prediction by {_number(term.get('effect_k'), ' K')} rms, "
+    return (f"    {term['term']:<18} changes the prediction by {_number(term.get('effect_k'), unit)} rms, "
             f"p = {_number(term.get('p_value'), digits=2)}" + (f" ({values})" if values else ""))
 
 
@@ -64,14 +64,15 @@ def diagnosis_report(d: Mapping) -> str:
     strength, what these data cannot decide, and the error before and after."""
     lines = [_heading("diagnosis", d), _rows(d)]
     base, final, valid = d.get("baseline"), d.get("final"), d.get("validation")
+    unit = RMSE_UNITS.get(d.get("physics"), "")
     if base:
         regimes = sorted({m.get("regime", "?") for m in d.get("mismatches", [])})
-        lines.append(f"  baseline {base['model']}: rmse {_number(base.get('rmse'), ' K')}; "
+        lines.append(f"  baseline {base['model']}: rmse {_number(base.get('rmse'), unit)}; "
                      f"{len(d.get('mismatches', []))} mismatch interval(s)" + (f" ({', '.join(regimes)})" if regimes else ""))
     named = d.get("missing_physics") or []
     if named:
         lines.append(f"  missing physics ({len(named)}):")
-        lines += [_term_line(t) for t in named]
+        lines += [_term_line(t, unit) for t in named]
     elif d.get("success"):
         lines.append("  missing physics: none; the model explains these recordings")
     cautions = d.get("not_determinable") or []
@@ -79,11 +80,11 @@ def diagnosis_report(d: Mapping) -> str:
         lines.append("  what these data cannot settle (the JSON's not_determinable: why, and the experiment that would):")
         lines += [f"    {u.get('term', '?'):<18} {_first_clause(u.get('reason', ''))}" for u in cautions]
     if final:
-        lines.append(f"  final {final['model']}: rmse {_number(final.get('rmse'), ' K')}; "
+        lines.append(f"  final {final['model']}: rmse {_number(final.get('rmse'), unit)}; "
                      f"{len(d.get('unexplained', []))} unexplained interval(s)")
     if valid:
-        lines.append(f"  held-out rmse {_number(valid.get('rmse_before'), ' K')} -> "
-                     f"{_number(valid.get('rmse_after'), ' K')} ({valid.get('method', '').split(':')[0]})")
+        lines.append(f"  held-out rmse {_number(valid.get('rmse_before'), unit)} -> "
+                     f"{_number(valid.get('rmse_after'), unit)} ({valid.get('method', '').split(':')[0]})")
     lines.append(f"  {d.get('message', '')}")
     return "\n".join(lines)
 
