@@ -57,3 +57,35 @@ def panda_bag() -> Path:
 @pytest.fixture(scope="session")
 def elbow_file() -> Path:
     return packaged_parameter_file("arm_left_4_joint")
+
+
+UNIT = r"\[[^\]]+\]|\([^)]*(?:°C|K|A|V|s|kg|rad|deg|N|W|%|count)[^)]*\)"
+
+
+def axes_without_units(fig) -> list[str]:
+    """Every drawn axis of ``fig`` whose label carries no unit in brackets or parentheses: each visible axes'
+    y label, and every x label that is set (the panels of a column share the bottom one's)."""
+    import re
+    bad = []
+    for ax in fig.axes:
+        if not ax.get_visible() or not (ax.lines or ax.patches or ax.collections):
+            continue
+        for axis, label in (("y", ax.get_ylabel()), ("x", ax.get_xlabel())):
+            if (axis == "y" or label) and not re.search(UNIT, label):
+                bad.append(f"{ax.get_title() or fig.texts[0].get_text() if fig.texts else ''} {axis}: {label!r}")
+    if not any(re.search(UNIT, ax.get_xlabel()) for ax in fig.axes if ax.get_visible()):
+        bad.append("no x axis with a unit")
+    return bad
+
+
+@pytest.fixture
+def figures_drawn(monkeypatch):
+    """Every matplotlib Figure saved while the test runs (they are still written)."""
+    from matplotlib.figure import Figure
+    drawn, save = [], Figure.savefig
+
+    def record(fig, *args, **kwargs):
+        drawn.append(fig)
+        return save(fig, *args, **kwargs)
+    monkeypatch.setattr(Figure, "savefig", record)
+    return drawn

@@ -13,6 +13,8 @@ import tomllib
 
 import numpy as np
 import pytest
+from conftest import axes_without_units
+from matplotlib.figure import Figure
 
 from thermo_ddp.model.actuated import load_model
 from thermo_ddp.model.arm import ELBOW
@@ -48,13 +50,29 @@ voltage_v = "motor_voltage"
 """
 
 
+DRAWN: list = []
+
+
 @pytest.fixture(scope="module")
 def chain(tmp_path_factory):
     out = tmp_path_factory.mktemp("loop")
     columns = tmp_path_factory.mktemp("map") / "robot_log.toml"
     columns.write_text(ROBOT_LOG)
-    table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True, columns=columns)
+    save = Figure.savefig
+
+    def record(fig, *args, **kwargs):  # the figures the run writes, kept to inspect their axes
+        DRAWN.append(fig)
+        return save(fig, *args, **kwargs)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Figure, "savefig", record)
+        table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True, columns=columns)
     return out, table
+
+
+def test_every_figure_of_the_loop_has_units(chain):
+    assert len(DRAWN) == 3  # diagnosis.png, loop.png, loop_summary.png
+    for fig in DRAWN:
+        assert axes_without_units(fig) == []
 
 
 def test_settings_are_validated():

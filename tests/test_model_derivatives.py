@@ -56,7 +56,7 @@ def test_step_jacobians(integrator):
     step = model.step(0.01, integrator)
     jac = model.step_jacobians(0.01, integrator)
     for x, u in _random_points(model, np.random.default_rng(1), 5):
-        _check(step, model, x, u)
+        _check(step.function, model, x, u)
         xn, a, b = (np.array(m) for m in jac(x, u, 26.0))
         assert np.allclose(xn.ravel(), np.array(step(x, u, 26.0)).ravel(), rtol=0, atol=1e-12)
         assert a.shape == (model.nx, model.nx) and b.shape == (model.nx, model.nu)
@@ -82,7 +82,7 @@ def test_analytic_rk4_jacobians_equal_automatic_differentiation_for_seven_joints
     from thermo_ddp.model.integrators import step_jacobians
 
     model = load_model(LEFT_ARM, payload_kg=40.0)
-    ours, ad = model.step_jacobians(0.01), step_jacobians(model.step(0.01))
+    ours, ad = model.step_jacobians(0.01), step_jacobians(model.step_function(0.01))
     for x, u in _random_points(model, np.random.default_rng(4), 3):
         for a, b in zip(ours(x, u, 26.0), ad(x, u, 26.0)):
             a, b = np.array(a), np.array(b)

@@ -173,10 +173,10 @@ def test_identify_of_a_short_recording_exits_1_with_json(tmp_path, capsys):
 
 def test_non_finite_result_is_marked_failed(tmp_path, capsys):
     out = Outputs.check({"--json": tmp_path / "r.json"})
-    code = cli._result({"success": True, "rmse": float("nan"), "xs": np.array([1.0, np.inf])}, out)
+    staged = cli._result({"success": True, "rmse": float("nan"), "xs": np.array([1.0, np.inf])}, out)
     out.commit()
     d = json.loads((tmp_path / "r.json").read_text())
-    assert code == 1 and d["success"] is False and d["status"] == "non_finite_result"
+    assert staged == d and d["success"] is False and d["status"] == "non_finite_result"
     assert d["rmse"] is None and d["xs"] == [1.0, None] and "rmse" in d["message"]
 
 

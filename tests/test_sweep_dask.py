@@ -144,3 +144,18 @@ def test_cli_diagnose_each_checks_every_recording_before_the_cluster(fleet_csvs,
     assert len(err.splitlines()) == 1 and "bad.csv" in err and "row 3" in err
     assert main(["diagnose", *fleet_csvs, "--each", "--plot", str(tmp_path / "f.png")]) == 2
     assert "--each" in capsys.readouterr().err
+
+
+def test_failed_resolves_are_counted_per_run_and_summarised():
+    """A re-solve that failed is counted from each run's events (not printed per period): the summary and
+    the report add them up and never say none when there were some."""
+    from thermo_ddp.studies.sweep import SweepResult
+
+    def run(seed, **events):
+        return {"seed": seed, "success": True, "violations": 0, "cutoff_trips": 0, "hold_ratio": 1.0,
+                "margin_c": 1.0, "fallbacks": sum(events.values()), "events": events}
+    runs = (run(1), run(2, solve_failed=2, fallback_plan=2), run(3, solve_timeout=1, fallback_plan=1))
+    result = SweepResult({"kind": "serial", "address": "in-process", "workers": 1}, runs, 0, True, 1.0)
+    s = result.summary()
+    assert s["failed_resolves"] == 3 and s["runs_with_failed_resolves"] == 2 and s["runs_with_fallback"] == 2
+    assert "re-solves that failed or came too late: 3 in 2 run(s)" in result.report()

@@ -1,4 +1,11 @@
 """thermo-ddp: thermal-aware constrained DDP for torque-controlled humanoid arms."""
+from importlib.metadata import PackageNotFoundError, version as _version
+
+try:  # the installed distribution's version (the wheel's), one source: pyproject.toml
+    __version__ = _version("thermo-ddp")
+except PackageNotFoundError:  # imported from a source tree that was never installed
+    __version__ = "0+unknown"
+
 from .model.actuated import ActuatedArm, Trajectory, load_model
 from .model.arm import LEFT_ARM, ArmSettings, build_arm
 from .errors import InputError

@@ -8,6 +8,7 @@ written only when the run ends.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import math
@@ -15,12 +16,18 @@ import sys
 import warnings
 from importlib import resources
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
+from . import __version__
+from ._cli_parsers import (JSON_STDOUT, Parser, cache_parser, demo_parser, loop_parser, plan_parser, recording_parser,
+                           split_global, sweep_parser)
+from ._cli_parsers import top_parser as _top_parser
+from ._logs import configure_logging
+from ._reports import MAX_LINES, diagnosis_report, files_report, fit_lines, identification_report
 from .errors import InputError, RunFailed
 from .outputs import Outputs
-from .tasks._common import DEFAULT_HOLD_S
 
 log = logging.getLogger(__name__)
 
@@ -31,51 +38,68 @@ OUTPUT_ARGS = {"json": "--json", "plot": "--plot", "write_model": "--write-model
 FIGURE_OPTIONS = ("--plot",)
 
 
-def _demo(args, out: Outputs) -> int:
+@dataclasses.dataclass(frozen=True)
+class Run:
+    """What a command hands back: its ``report`` (printed) and its JSON-ready result (``data``: staged for
+    ``--json`` when ``stage``; ``success: false`` in it gives exit 1)."""
+
+    report: str
+    data: dict | None = None
+    stage: bool = True
+
+
+def _demo(args, out: Outputs) -> Run:
     from .studies.demo import hold_demo
-    print(hold_demo(args.payload_kg, args.hold_s).report())
-    return 0
+    return Run(hold_demo(args.payload_kg, args.hold_s).report())
 
 
-def _plan(args, out: Outputs) -> int:
+def _plan(args, out: Outputs) -> Run:
     from .tasks.lift import plan_lift
     options = {"solver": args.solver, "careful_motion": args.careful_motion}
     if args.model:
         options["parameter_file"] = args.model
     plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
-    print(plan.report())
     out.figure("--plot", plan.plot)
-    return _result(plan.to_dict(), out, stdout=False)
+    return Run(plan.report(), plan.to_dict())
 
 
-def _compare(args, out: Outputs) -> int:
+def _compare(args, out: Outputs) -> Run:
+    from ._figures import plot_comparison
     from .tasks.lift import compare_limits
     limits = tuple(args.limits_c) if args.limits_c else None
-    print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver).table())
-    return 0
+    comparison = compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver)
+    out.figure("--plot", lambda path: plot_comparison(comparison.plans, path))
+    data = {"success": all(p.status != "failed" for p in comparison.plans), "payload_kg": args.payload_kg,
+            "hold_s": args.hold_s, "rows": [r | {"status": p.status, "message": p.message}
+                                            for r, p in zip(comparison.rows(), comparison.plans)]}
+    return Run(comparison.table(), data)
 
 
-def _loop(args, out: Outputs) -> int:
+def _loop(args, out: Outputs) -> Run:
     from .studies.loop import loop_files
-    options = {"limits_c": tuple(args.limits_c), "oracle": not args.no_oracle, "columns": args.columns}
+    options = {"limits_c": tuple(args.limits_c), "columns": args.columns, "progress": _progress(args)}
     if args.hold_s is not None:
         options["hold_s"] = args.hold_s
+    if args.no_oracle:  # else the settings' default: with the true parameters, except --short
+        options["oracle"] = False
     table = loop_files(args.out, short=args.short, **options)
-    print((Path(args.out) / "loop.txt").read_text(), end="")
-    print(f"outputs in {args.out}: loop.json, loop.png, loop_summary.png, diagnosis.json, models/, recordings/")
-    return _exit_status(table)
+    report = (Path(args.out) / "loop.txt").read_text().rstrip("\n")
+    files = f"  files in {args.out}/: loop.txt, loop.json, loop.png, loop_summary.png, diagnosis.json, diagnosis.png, " \
+            "models/*.toml, recordings/*.csv"
+    return Run(f"{report}\n{files}", {"success": table.get("success")}, stage=False)
 
 
-def _cache(args, out: Outputs) -> int:
+def _cache(args, out: Outputs) -> Run:
     from . import codegen
+    lines = []
     if args.clear:
-        print(f"removed {codegen.clear_cache()} files from {codegen.cache_dir()}")
+        lines.append(f"removed {codegen.clear_cache()} files from {codegen.cache_dir()}")
     if args.info or not args.clear:
-        print(codegen.cache_info().report())
-    return 0
+        lines.append(codegen.cache_info().report())
+    return Run("\n".join(lines))
 
 
-def _identify(args, out: Outputs) -> int:
+def _identify(args, out: Outputs) -> Run:
     _check_physics_model(args)
     if args.physics == "mechanical":
         from .identify.mechanical import identify_mechanical_files
@@ -84,10 +108,10 @@ def _identify(args, out: Outputs) -> int:
         from .identify.thermal import identify_thermal_files
         result = identify_thermal_files(args.recordings, parameters=args.model, columns=args.columns)
     _stage_model(out, result)
-    return _result(result, out)
+    return Run(identification_report(result), result)
 
 
-def _diagnose(args, out: Outputs) -> int:
+def _diagnose(args, out: Outputs) -> Run:
     _check_physics_model(args)
     if args.each:
         return _diagnose_each(args, out)
@@ -95,14 +119,15 @@ def _diagnose(args, out: Outputs) -> int:
         from .diagnose.mechanical import diagnose_mechanical_files
         result = diagnose_mechanical_files(args.recordings, plot=out.temporary("--plot"), columns=args.columns)
     else:
-        from .diagnose.thermal import diagnose_thermal_files
+        from .diagnose.thermal import ThermalDiagnosisSettings, diagnose_thermal_files
         result = diagnose_thermal_files(args.recordings, plot=out.temporary("--plot"), parameters=args.model,
-                                        columns=args.columns)
+                                        columns=args.columns,
+                                        settings=ThermalDiagnosisSettings(progress=_progress(args)))
     _stage_model(out, result)
-    return _result(result, out)
+    return Run(diagnosis_report(result), result)
 
 
-def _diagnose_each(args, out: Outputs) -> int:
+def _diagnose_each(args, out: Outputs) -> Run:
     """``diagnose --each``: one diagnosis per recording (a fleet) as Dask tasks, and the fleet's table. Every
     recording and the parameter file are read and checked here first, before the cluster starts."""
     from .identify.thermal import load_joint_parameters
@@ -119,28 +144,31 @@ def _diagnose_each(args, out: Outputs) -> int:
         options["parameters"] = args.model
     for path in args.recordings:
         read_recordings([path], args.columns)
-    fleet = diagnose_fleet(args.recordings, args.physics, engine, **options)
-    print(fleet.report())
-    return _result(fleet.to_dict(), out, stdout=False)
+    fleet = diagnose_fleet(args.recordings, args.physics, engine, progress=_progress(args), **options)
+    return Run(fleet.report(), fleet.to_dict())
 
 
-def _validate(args, out: Outputs) -> int:
+def _validate(args, out: Outputs) -> Run:
     from .validate import validate_files
     result = validate_files(args.recordings, args.model, args.columns)
-    print(result.report())
     if result.success:
         out.figure("--plot", result.plot)
-    return _result(result.to_dict(), out, stdout=False)
+    return Run(result.report(), result.to_dict())
 
 
-def _sweep(args, out: Outputs) -> int:
+def _sweep(args, out: Outputs) -> Run:
     from .studies.engine import EngineSettings
     from .studies.sweep import robustness_sweep
     result = robustness_sweep(args.runs, args.seed, args.short, EngineSettings(scheduler=args.scheduler,
-                                                                               workers=args.workers))
-    print(result.report())
+                                                                               workers=args.workers),
+                              progress=_progress(args))
     out.figure("--plot", result.plot)
-    return _result(result.to_dict(), out, stdout=False)
+    return Run(result.report(), result.to_dict())
+
+
+def _progress(args) -> bool | None:
+    """Progress bars: off with -q, else on a terminal only (None: tqdm's own test of stderr)."""
+    return False if args.verbosity < 0 else None
 
 
 def _check_physics_model(args) -> None:
@@ -165,11 +193,6 @@ def _stage_model(out: Outputs, result: dict) -> None:
 # --------------------------------------------------------------------------------------------
 # Results: JSON-ready, never NaN, the exit status from ``success``
 # --------------------------------------------------------------------------------------------
-def _exit_status(data: dict) -> int:
-    """1 when the result says it ran but failed (``success: false``), else 0."""
-    return 1 if data.get("success") is False else 0
-
-
 def _plain(value, where: str, bad: list[str]):
     """``value`` with numpy types as Python ones and non-finite numbers as None (their paths in ``bad``)."""
     if isinstance(value, dict):
@@ -184,9 +207,9 @@ def _plain(value, where: str, bad: list[str]):
     return value
 
 
-def _result(data: dict, out: Outputs, stdout: bool = True) -> int:
-    """Stage the result JSON for ``--json`` (or print it when ``stdout`` and no file was asked for);
-    a result holding NaN or inf is not a result: it is marked failed (exit 1), never passed on."""
+def _result(data: dict, out: Outputs) -> dict:
+    """``data`` JSON-ready and staged for ``--json`` (a file; stdout with ``--json -``); a result holding NaN
+    or inf is not a result: it is marked failed (exit 1), never passed on."""
     bad: list[str] = []
     data = _plain(data, "", bad)
     if bad:
@@ -195,181 +218,70 @@ def _result(data: dict, out: Outputs, stdout: bool = True) -> int:
                  "message": f"the result holds non-finite numbers (first at {bad[0].lstrip('.')}); not trustworthy"}
     if out.wanted("--json"):
         out.json("--json", data)
-    elif stdout:
-        print(json.dumps(data, indent=2))
-    return _exit_status(data)
+    return data
 
 
 def _outputs(args) -> Outputs:
     """Every output of ``args`` checked against every input (the packaged parameter files included: the
-    default models) and each other, before any work."""
+    default models) and each other, before any work; ``--json -`` is stdout, not a file."""
     inputs = sorted(Path(str(resources.files("thermo_ddp.models"))).glob("*.toml"))  # default models
     for name in INPUT_ARGS:
         value = getattr(args, name, None)
         inputs += list(value) if isinstance(value, (list, tuple)) else [value] if value else []
     wanted = {option: getattr(args, name, None) for name, option in OUTPUT_ARGS.items()}
+    if wanted["--json"] == JSON_STDOUT:
+        wanted["--json"] = None
     return Outputs.check(wanted, inputs, FIGURE_OPTIONS)
 
 
-def _number(unit: str):
-    """An argparse ``type``: a finite number (the unit named in the message)."""
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number in {unit}, got {text!r}") from None
-        if not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"expected a finite number in {unit}, got {text!r}")
-        return value
-    return parse
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (the contract: exit 2 with a one-line message)."""
-
-    def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message}\n")
-
-
-def _recording_parser(name: str, description: str, plot: bool) -> _Parser:
-    cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns, or any "
-                                                                  "columns with --columns); required")
-    if name == "validate":
-        cmd.add_argument("--model", metavar="TOML", required=True, help="parameter file to validate; required")
-    else:
-        cmd.add_argument("--physics", choices=("thermal", "mechanical"), default="thermal",
-                         help="which physics to model (default %(default)s)")
-        cmd.add_argument("--model", metavar="TOML", help="parameter file: fixed values and start values (default: "
-                                                         "the packaged models/arm_left_4_joint.toml)")
-        cmd.add_argument("--write-model", metavar="OUT.toml", help="write the identified / improved parameter "
-                                                                   "file here (default: none)")
-    cmd.add_argument("--columns", metavar="MAP.toml", help="column map: how the CSVs' own columns become the "
-                                                           "recording contract (default: contract columns)")
-    cmd.add_argument("--json", metavar="OUT", help="write the result JSON here (default: "
-                                                   f"{'none' if name == 'validate' else 'stdout'})")
-    if plot:
-        cmd.add_argument("--plot", metavar="OUT.png", help=f"write the {name} figure here (default: none)")
-    if name == "diagnose":
-        cmd.add_argument("--each", action="store_true", help="flag: one diagnosis per recording (a fleet) as Dask "
-                         "tasks, and a table of which recordings show which missing physics")
-        _engine_arguments(cmd)
-    return cmd
-
-
-def _engine_arguments(cmd: _Parser) -> None:
-    cmd.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                     help="Dask scheduler, e.g. tcp://127.0.0.1:8786 (default: a LocalCluster on this machine)")
-    cmd.add_argument("--workers", type=int, default=2,
-                     help="worker processes of the LocalCluster, count (default %(default)s; ignored with --scheduler)")
-
-
-def _demo_parser() -> _Parser:
-    demo = _Parser(prog="thermo-ddp demo", description="static hold of a payload by the elbow: torque, "
-                                                       "current and winding heating")
-    demo.add_argument("--payload-kg", type=_number("kg"), default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    demo.add_argument("--hold-s", type=_number("s"), default=DEFAULT_HOLD_S, help="duration of the hold, s (default %(default)s)")
-    return demo
-
-
-def _plan_parser(name: str, description: str) -> _Parser:
-    cmd = _Parser(prog=f"thermo-ddp {name}", description=description)
-    cmd.add_argument("--payload-kg", type=_number("kg"), default=40.0, help="payload at the gripper, kg (default %(default)s)")
-    cmd.add_argument("--hold-s", type=_number("s"), default=DEFAULT_HOLD_S, help="requested hold at the goal, s (default %(default)s)")
-    cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
-                     help="solver of the transcribed problem (default %(default)s)")
-    if name == "plan":
-        cmd.add_argument("--limit-c", type=_number("°C"), default=None,
-                         help="winding limit, °C (default: the model file's [limits] safety_cutoff_c, 84 for the elbow)")
-        cmd.add_argument("--model", metavar="TOML", help="elbow parameter file (default: the packaged "
-                                                         "models/arm_left_4_joint.toml)")
-        cmd.add_argument("--json", metavar="OUT", help="write the plan JSON here (default: none)")
-        cmd.add_argument("--plot", metavar="OUT.png", help="write the four-panel figure here (default: none)")
-        cmd.add_argument("--careful-motion", action=argparse.BooleanOptionalAction, default=True,
-                         help="flag, on by default (--no-careful-motion: off): one direction per phase, slow near the "
-                              "joint stops, at rest at the end, an acceleration cost (LiftSettings.careful_motion)")
-    else:
-        cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=None,
-                         help="winding limits to compare, °C (default: the elbow file's safety_cutoff_c and "
-                              "winding_max_c, 84 and 140)")
-    return cmd
-
-
-def _loop_parser() -> _Parser:
-    cmd = _Parser(prog="thermo-ddp loop", description="recordings -> identification -> diagnosis -> improved "
-                  "model -> plan -> closed loop, original vs improved model, on the simulated elbow")
-    cmd.add_argument("--out", default="loop_out", help="output folder (default %(default)s)")
-    cmd.add_argument("--short", action="store_true", help="flag: 30-minute experiments and a 45 s hold")
-    cmd.add_argument("--hold-s", type=_number("s"), default=None,
-                     help="requested hold at the goal, s (default: LoopSettings.hold_s; --short shortens it)")
-    cmd.add_argument("--limits-c", type=_number("°C"), nargs="+", default=[84.0, 140.0],
-                     help="winding limits, °C (default %(default)s)")
-    cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters")
-    cmd.add_argument("--columns", metavar="MAP.toml", help="column map: the robot logs its recordings in the map's own "
-                                                           "column names and the chain reads them through it "
-                                                           "(default: contract columns)")
-    return cmd
-
-
-def _sweep_parser() -> _Parser:
-    cmd = _Parser(prog="thermo-ddp sweep", description="randomised closed-loop lifts (plant thermal values "
-                  "+-25 %, friction +-30 %, sensor noise, start 30-60 °C) on Dask: a LocalCluster by default")
-    cmd.add_argument("--runs", type=int, default=200, help="number of runs (default %(default)s)")
-    cmd.add_argument("--short", action="store_true", help="flag: a 5 s hold instead of 15 s")
-    cmd.add_argument("--seed", type=int, default=0, help="seed of the sweep; run i's seed is word i of its "
-                                                         "stream (default %(default)s)")
-    _engine_arguments(cmd)
-    cmd.add_argument("--json", metavar="OUT", help="write the sweep JSON here (default: none)")
-    cmd.add_argument("--plot", metavar="OUT.png", help="write the margin and hold histograms here (default: none)")
-    return cmd
-
-
-def _cache_parser() -> _Parser:
-    from .codegen import DEFAULT_CACHE_MAX_MB
-    cmd = _Parser(prog="thermo-ddp cache", description="the compiled-library cache: $THERMO_DDP_CACHE (default "
-                  f"~/.cache/thermo_ddp), capped at $THERMO_DDP_CACHE_MAX_MB (default {DEFAULT_CACHE_MAX_MB:g} MB; "
-                  "least recently used libraries are removed after a build)")
-    cmd.add_argument("--clear", action="store_true", help="flag: remove the compiled libraries (nothing else)")
-    cmd.add_argument("--info", action="store_true", help="flag: print the folder, libraries and size "
-                                                         "(what the command does without flags)")
-    return cmd
+@dataclasses.dataclass(frozen=True)
+class Command:
+    summary: str  # one line for the top-level --help
+    parser: Callable[[], Parser]
+    run: Callable[[argparse.Namespace, Outputs], Run]
 
 
 COMMANDS = {
-    "loop": (_loop_parser, _loop),
-    "plan": (lambda: _plan_parser("plan", "plan the elbow lift under a winding-temperature limit"), _plan),
-    "compare": (lambda: _plan_parser("compare", "the lift under several winding limits, as a table"), _compare),
-    "demo": (_demo_parser, _demo),
-    "identify": (lambda: _recording_parser("identify", "identify parameters from recordings", False), _identify),
-    "diagnose": (lambda: _recording_parser("diagnose", "locate model mismatch, name and add the missing "
-                                                       "physics, refit and validate", True), _diagnose),
-    "validate": (lambda: _recording_parser("validate", "predict recordings with a parameter file as it is "
-                                                       "(no refit) and report the error", True), _validate),
-    "cache": (_cache_parser, _cache),
-    "sweep": (_sweep_parser, _sweep),
+    "plan": Command("plan the elbow lift under a winding-temperature limit",
+                    lambda: plan_parser("plan", "plan the elbow lift under a winding-temperature limit"), _plan),
+    "compare": Command("the lift planned under several winding limits, as a table",
+                       lambda: plan_parser("compare", "the lift under several winding limits, as a table"), _compare),
+    "demo": Command("static hold of a payload: torque, current, when the winding reaches its limits",
+                    demo_parser, _demo),
+    "identify": Command("fit a thermal or mechanical model to recordings (CSV)",
+                        lambda: recording_parser("identify", "identify parameters from recordings", False), _identify),
+    "diagnose": Command("find what a model misses in recordings, name the missing physics, refit",
+                        lambda: recording_parser("diagnose", "locate model mismatch, name and add the missing "
+                                                             "physics, refit and validate", True), _diagnose),
+    "validate": Command("predict recordings with a parameter file as it is and report the error",
+                        lambda: recording_parser("validate", "predict recordings with a parameter file as it is "
+                                                             "(no refit) and report the error", True), _validate),
+    "loop": Command("the whole chain on the simulated elbow: record, diagnose, improve, plan, run",
+                    loop_parser, _loop),
+    "sweep": Command("randomised closed-loop lifts on Dask: margins and holds", sweep_parser, _sweep),
+    "cache": Command("the compiled-library cache: where, how big; --clear", cache_parser, _cache),
 }
 
 
-def top_parser() -> _Parser:
-    top = _Parser(prog="thermo-ddp", description=__doc__)
-    top.add_argument("-v", "--verbose", action="store_true", help="flag: log progress (INFO)")
-    top.add_argument("command", choices=sorted(COMMANDS), help="required: one of %(choices)s")
-    top.add_argument("args", nargs=argparse.REMAINDER, help="the command's arguments (see COMMAND --help)")
-    return top
+def top_parser() -> Parser:
+    return _top_parser({name: c.summary for name, c in COMMANDS.items()}, __version__)
 
 
 def main(argv: list[str] | None = None) -> int:
+    verbosity, argv = split_global(sys.argv[1:] if argv is None else list(argv))
     ns = top_parser().parse_args(argv)
-    make_parser, run = COMMANDS[ns.command]
-    args = make_parser().parse_intermixed_args(ns.args)
-    logging.basicConfig(level=logging.INFO if ns.verbose else logging.WARNING, format="%(name)s: %(message)s")
+    command = COMMANDS[ns.command]
+    args = command.parser().parse_intermixed_args(ns.args)
+    args.verbosity = verbosity
+    configure_logging(verbosity)
     out = Outputs()
     with warnings.catch_warnings(record=True) as caught:  # a refusal prints one line, nothing else
         warnings.simplefilter("default")
         try:
             _check_environment()
             out = _outputs(args)
-            status = run(args, out)
+            run = command.run(args, out)
+            data = _result(run.data, out) if run.data is not None and run.stage else run.data
             written = _commit(out)
         except InputError as err:
             print(f"thermo-ddp: {err}", file=sys.stderr)
@@ -382,9 +294,22 @@ def main(argv: list[str] | None = None) -> int:
             return 130
         finally:
             out.discard()
-    for w in caught:  # the run went through: its warnings are worth reading
-        log.warning("%s: %s (%s:%d)", w.category.__name__, w.message, w.filename, w.lineno)
-    return status if written else 1
+    _print(run.report, data, written, getattr(args, "json", None) == JSON_STDOUT)
+    for w in caught:  # the run went through: its warnings are for those who ask (-v)
+        log.info("%s: %s (%s:%d)", w.category.__name__, w.message, w.filename, w.lineno)
+    if written is None:
+        return 1
+    return 1 if data is not None and data.get("success") is False else 0
+
+
+def _print(report: str, data: dict | None, written: dict[str, Path] | None, json_stdout: bool) -> None:
+    """The report (on stderr when stdout carries the JSON), the files written, and the JSON for ``--json -``."""
+    text = fit_lines(report, MAX_LINES - len(written or {}) - 1)
+    if written:
+        text += "\nfiles:\n" + files_report(written)
+    print(text, file=sys.stderr if json_stdout else sys.stdout)
+    if json_stdout and data is not None:
+        print(json.dumps(data, indent=2, allow_nan=False))
 
 
 def _check_environment() -> None:
@@ -396,15 +321,16 @@ def _check_environment() -> None:
     cache_max_bytes()
 
 
-def _commit(out: Outputs) -> bool:
-    """Write the staged outputs; False (one line on stderr, nothing replaced) when the system refuses."""
+def _commit(out: Outputs) -> dict[str, Path] | None:
+    """Write the staged outputs (returned by option); None (one line on stderr, nothing replaced) when the
+    system refuses."""
     try:
-        out.commit()
+        written = out.commit()
     except OSError as err:
         print(f"thermo-ddp: cannot write the outputs ({err.strerror or err}); earlier files are unchanged",
               file=sys.stderr)
-        return False
-    return True
+        return None
+    return {option: path for option, path in out.paths.items() if path in written}
 
 
 if __name__ == "__main__":

@@ -197,16 +197,15 @@ class Diagnosis(SelectedTerms):
             ax[0].plot(t, sel.final.fit.fitted[rows], lw=0.8, label=f"final ({sel.final.fit.model})")
             ax[1].plot(t, sel.baseline.fit.residuals[rows], lw=0.5, label=f"baseline, rmse {sel.baseline.fit.rmse:.3g}")
             ax[1].plot(t, sel.final.fit.residuals[rows], lw=0.5, label=f"final, rmse {sel.final.fit.rmse:.3g}")
-            for m in sel.baseline_localisation.mismatches:
-                if m.recording == kin.recording:
-                    ax[1].axvspan(m.start_s, m.end_s, color="red", alpha=0.2, lw=0)
-            for m in sel.final_localisation.mismatches:
-                if m.recording == kin.recording:
-                    ax[1].axvspan(m.start_s, m.end_s, color="grey", alpha=0.3, lw=0)
+            for loc, color, meaning in ((sel.baseline_localisation, "red", "mismatch of the baseline"),
+                                        (sel.final_localisation, "grey", "left unexplained by the final model")):
+                spans = [m for m in loc.mismatches if m.recording == kin.recording]
+                for k, m in enumerate(spans):
+                    ax[1].axvspan(m.start_s, m.end_s, color=color, alpha=0.25, lw=0, label=None if k else meaning)
             ax[2].plot(t, kin.velocity, lw=0.8)
-            ax[0].set(title=kin.recording, ylabel="effort")
-            ax[1].set(ylabel="residual (red: mismatch, grey: unexplained)")
-            ax[2].set(ylabel="velocity", xlabel="time [s]")
+            ax[0].set(title=kin.recording, ylabel="effort [N·m or N, the joint's SI unit]")
+            ax[1].set(ylabel="effort residual [N·m or N]")
+            ax[2].set(ylabel="velocity [rad/s or m/s]", xlabel="time [s]")
             ax[0].legend(fontsize=8)
             ax[1].legend(fontsize=8)
         fig.tight_layout()

@@ -57,6 +57,7 @@ from tqdm.auto import tqdm
 
 from .._config import require
 from .._figures import new_figure
+from .figure import plot_thermal_diagnosis
 from ..identify.fit_report import integrated_autocorrelation
 from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THERMAL_TERMS, JointParameters, ThermalFit,
                                 ThermalModel, canonical_terms, default_fixed, fit_grids, load_joint_parameters,
@@ -799,7 +800,7 @@ def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None 
     recordings = read_recordings(paths, columns)
     diagnosis = diagnose_thermal(list(recordings.recordings), **options)
     if plot is not None:
-        diagnosis.plot(plot)
+        plot_thermal_diagnosis(diagnosis, plot)
     return diagnosis.to_dict() | {"rows": recordings.rows}
 
 

@@ -187,21 +187,27 @@ class ActuatedArm:
         return a
 
     # --- functions --------------------------------------------------------------------
-    def step(self, dt_s: float, integrator: str = "rk4", runtime_payload: bool = False) -> ca.Function:
-        """Named ``step(x, current_a, ambient_c) -> x_next``; with ``runtime_payload`` the third input is
-        ``ambient_payload`` = [ambient_c, payload_kg] (the model's own payload is then not used)."""
+    def step(self, dt_s: float, integrator: str = "rk4") -> "Step":
+        """``step(x, current_a, ambient_c=None) -> x_next`` on numpy arrays, as :meth:`state` returns them
+        (``ambient_c`` None: the model's room); its CasADi Function is ``step.function`` (:meth:`step_function`)."""
+        return Step(self.step_function(dt_s, integrator), self.ambient_c)
+
+    def step_function(self, dt_s: float, integrator: str = "rk4", runtime_payload: bool = False) -> ca.Function:
+        """The CasADi Function ``step(x, current_a, ambient_c) -> x_next`` (symbolic use, ``mapaccum``,
+        code generation); with ``runtime_payload`` the third input is ``ambient_payload`` = [ambient_c,
+        payload_kg] (the model's own payload is then not used)."""
         dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
         ode = self.runtime_payload_functions[0] if runtime_payload else self.ode
         return make_step(ode, dt_s, check_integrator(_SRC, integrator))
 
     def step_jacobians(self, dt_s: float, integrator: str = "rk4", runtime_payload: bool = False) -> ca.Function:
-        """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)`` (inputs as :meth:`step`)."""
+        """Named ``step_jacobians(x, current_a, ambient_c) -> (x_next, A, B)`` (inputs as :meth:`step_function`)."""
         dt_s = STEP_S.check(_SRC, "dt_s", dt_s, "out of range")
         substeps = rk4_substeps(check_integrator(_SRC, integrator))
         if substeps is not None:
             jac = self.runtime_payload_functions[1] if runtime_payload else self.ode_jacobians
             return rk4_step_jacobians(jac, dt_s, substeps)
-        return step_jacobians(self.step(dt_s, integrator, runtime_payload))
+        return step_jacobians(self.step_function(dt_s, integrator, runtime_payload))
 
     def static_current_a(self, q) -> np.ndarray:
         """Currents that hold posture ``q`` (nu,) at rest, or each row of postures (K, nu) (gravity only;
@@ -218,7 +224,7 @@ class ActuatedArm:
         """Plant simulation with zero-order-hold currents ``current_a`` of shape (N, nu)."""
         x0, u, amb = self._simulation_inputs(x0, current_a, ambient_c)
         n = u.shape[0]
-        sim = self.step(dt_s, integrator).mapaccum(n)
+        sim = self.step_function(dt_s, integrator).mapaccum(n)
         xs = np.vstack([x0, np.array(sim(x0, u.T, amb.reshape(1, -1))).T])
         return Trajectory(self, np.arange(n + 1) * float(dt_s), xs, u, amb)
 
@@ -243,6 +249,19 @@ class ActuatedArm:
         for value in np.unique(amb):
             BOUNDS["ambient_c"].check(_SRC, "ambient_c", value)
         return x0, u, np.broadcast_to(amb, (n,)).astype(float)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One integration step on numpy arrays: ``step(x, current_a, ambient_c=None)`` -> ``x_next`` (nx,);
+    ``function`` is the CasADi Function it calls (for symbolic use)."""
+
+    function: ca.Function
+    default_ambient_c: float
+
+    def __call__(self, x, current_a, ambient_c=None) -> np.ndarray:
+        ambient = self.default_ambient_c if ambient_c is None else ambient_c
+        return np.asarray(self.function(x, current_a, ambient), dtype=float).reshape(-1)
 
 
 @dataclass(frozen=True)

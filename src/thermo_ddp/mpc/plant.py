@@ -71,7 +71,7 @@ class Plant:
         self.time_s = 0.0
         self.current_a = np.zeros(model.nu)
         dt = settings.controller.control_period_s / settings.plant.plant_substeps
-        self._period = model.step(dt, "rk4").mapaccum(settings.plant.plant_substeps)
+        self._period = model.step_function(dt, "rk4").mapaccum(settings.plant.plant_substeps)
         self._peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
         self._casing = model.sensor_indices()
         self._winding = model.node_indices("winding")

@@ -17,6 +17,7 @@ from typing import Any, Callable, Iterator, Sequence
 from tqdm import tqdm
 
 from .._config import checked_settings, require
+from .._progress import hidden
 from ..errors import InputError
 
 log = logging.getLogger(__name__)
@@ -98,21 +99,22 @@ def engine_info(client) -> EngineInfo:
     return EngineInfo("dask", str(client.scheduler.address), len(workers))
 
 
-def map_tasks(client, task: Callable[..., Any], items: Sequence[Any], *, progress: bool = True,
+def map_tasks(client, task: Callable[..., Any], items: Sequence[Any], *, progress: bool | None = True,
               desc: str = "tasks", **kwargs: Any) -> list[TaskOutcome]:
-    """``task(item, **kwargs)`` for every item on the cluster, in item order; a bar on the client."""
+    """``task(item, **kwargs)`` for every item on the cluster, in item order; a bar on the client (``progress``:
+    None on a terminal only). A task that raised is counted in the result, not logged inside the bar."""
     from distributed import as_completed
 
     futures = client.map(task, list(items), pure=False, **kwargs)
     index = {f.key: i for i, f in enumerate(futures)}
     outcomes: list[TaskOutcome | None] = [None] * len(futures)
-    for future in tqdm(as_completed(futures), total=len(futures), desc=desc, disable=not progress):
+    for future in tqdm(as_completed(futures), total=len(futures), desc=desc, disable=hidden(progress)):
         i = index[future.key]
         if future.status == "finished":
             outcomes[i] = TaskOutcome(items[i], True, future.result())
         else:
             err = future.exception()
             outcomes[i] = TaskOutcome(items[i], False, message=f"{type(err).__name__}: {err}")
-            log.warning("task %s failed: %s", items[i], outcomes[i].message)
+            log.debug("task %s failed: %s", items[i], outcomes[i].message)
         future.release()
     return outcomes  # type: ignore[return-value]

@@ -73,7 +73,7 @@ def _error(message: str) -> dict[str, Any]:
 
 
 def diagnose_fleet(paths: Sequence[str | Path], physics: str = "thermal",
-                   engine: EngineSettings = EngineSettings(), progress: bool = True,
+                   engine: EngineSettings = EngineSettings(), progress: bool | None = True,
                    **options: Any) -> FleetDiagnosis:
     """One diagnosis per recording on Dask; ``options`` go to each diagnosis unchanged."""
     recordings = tuple(str(p) for p in paths)

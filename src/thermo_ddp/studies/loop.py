@@ -43,6 +43,7 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError, RunFailed
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
+from ..diagnose.figure import plot_thermal_diagnosis
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
 from ..tasks._common import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
@@ -53,7 +54,7 @@ from ..model.parameters import (JointParameters, load_parameters, packaged_param
 from ..testing.testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters, SimulatedRecording, biceps, static_3a,
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
-from .._figures import new_figure
+from .._progress import hidden
 from ..outputs import check_output_folder, write_folder_atomically
 from ..recordings import ColumnMap, load_column_map, read_recordings
 
@@ -61,6 +62,9 @@ log = logging.getLogger(__name__)
 _SRC = "loop"
 MODELS = ("original", "improved")
 ORACLE = "truth"  # the robot's own parameter file as the planner's model: what perfect knowledge achieves
+# LoopSettings.short(): 30-minute experiments, a 45 s hold (still longer than the robot can hold 40 kg under
+# 140 °C) and no oracle
+SHORT_DEFAULTS = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
 
 
 # ----------------------------------------------------------------------------- settings
@@ -109,10 +113,8 @@ class LoopSettings:
 
     @classmethod
     def short(cls, **options) -> "LoopSettings":
-        """Short experiments (30 min heating and cooling), a 45 s requested hold (still longer than the
-        robot can hold 40 kg under 140 °C) and no oracle, for tests and the notebook's quick run."""
-        defaults = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
-        return settings_from_mapping(cls, defaults | options, _SRC)
+        """:data:`SHORT_DEFAULTS` (overridden by ``options``), for tests and the notebook's quick run."""
+        return settings_from_mapping(cls, SHORT_DEFAULTS | options, _SRC)
 
     @property
     def models(self) -> tuple[str, ...]:
@@ -316,7 +318,15 @@ class LoopResult:
                           f"diagnosis: {d['baseline_model']} -> {d['final_model']}, missing physics "
                           f"{', '.join(d['missing_physics']) or 'none'}, held-out rmse {d['rmse_before']:.3f} -> "
                           f"{d['rmse_after']:.3f} K", self.parameter_table(), self.table(),
-                          *(c["statement"] for c in self.claims())])
+                          *(c["statement"] for c in self.claims()), *self.fallback_lines()])
+
+    def fallback_lines(self) -> list[str]:
+        """Periods whose re-solve failed or came late (the previous plan's control was applied), per run."""
+        counts = {f"{r['model']} {r['limit_c']:g} °C": r["fallback_periods"] for r in self.rows() if r["fallback_periods"]}
+        if not counts:
+            return []
+        return ["re-solves that failed or came late (the previous plan's control applied): "
+                + ", ".join(f"{k}: {n}" for k, n in counts.items())]
 
     def parameter_table(self) -> str:
         """The improved model's thermal parameters (± standard error) next to the robot's hidden values."""
@@ -327,10 +337,12 @@ class LoopResult:
 
     def plot(self, path: str | Path) -> Path:
         """Per limit: true and estimated winding, current, measured casing, for both models."""
+        from .loop_figures import plot_loop
         return plot_loop(self, Path(path))
 
     def plot_summary(self, path: str | Path) -> Path:
         """Bars: planned and executed hold, margin to the limit, per model and limit."""
+        from .loop_figures import plot_summary
         return plot_summary(self, Path(path))
 
 
@@ -371,61 +383,6 @@ def oracle_claim(improved: dict[str, Any], truth: dict[str, Any]) -> dict[str, A
         text += f" (the improved model gets {100 * share:.0f} % of that hold)"
     return {"oracle_hold_s": truth["closed_loop_hold_s"], "oracle_margin_c": truth["margin_c"],
             "improved_hold_share_of_oracle": share, "statement": text}
-
-
-# ----------------------------------------------------------------------------- figures
-_COLORS = {"original": "tab:blue", "improved": "tab:green", ORACLE: "tab:gray"}
-
-
-def plot_loop(result: LoopResult, path: Path) -> Path:
-
-    limits = result.settings.limits_c
-    fig, axes = new_figure(3, len(limits), figsize=(7 * len(limits), 10), sharex="col", squeeze=False)
-    for c, lim in enumerate(limits):
-        ax = axes[:, c]
-        for model in result.settings.models:
-            e, color = result.execution(model, lim), _COLORS[model]
-            r = e.run
-            ax[0].plot(r.time_s, r.winding_c, c=color, label=f"{model}: true winding (peak {r.peak_winding_c:.1f} °C)")
-            ax[0].plot(r.time_s, r.estimated_winding_c, c=color, ls="--", label=f"{model}: planner's estimate")
-            ax[1].step(r.time_s[:-1], r.current_a, where="post", c=color,
-                       label=f"{model}: current (hold {r.achieved_hold_s:.1f} s)")
-            ax[2].plot(r.time_s, r.measured_casing_c, c=color, label=f"{model}: measured casing")
-        ax[0].axhline(lim, c="k", ls="--", label=f"winding limit {lim:g} °C")
-        ax[0].set(title=f"{result.settings.payload_kg:g} kg lift, winding limit {lim:g} °C (closed loop on the "
-                        "robot's true physics)", ylabel="winding [°C]")
-        ax[1].set(ylabel="current [A]")
-        ax[2].axhline(result.execution("improved", lim).run.safety_cutoff_c, c="r", ls=":", label="safety cut-off")
-        ax[2].set(ylabel="casing sensor [°C]", xlabel="time [s]")
-        for a in ax:
-            a.grid(alpha=0.3)
-            a.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    return path
-
-
-def plot_summary(result: LoopResult, path: Path) -> Path:
-
-    rows = result.rows()
-    labels = [f"{r['model']}\n{r['limit_c']:g} °C" for r in rows]
-    x = np.arange(len(rows))
-    fig, ax = new_figure(1, 2, figsize=(12, 4))
-    ax[0].bar(x - 0.2, [r["planned_hold_s"] for r in rows], 0.4, label="planned (open loop, model)")
-    ax[0].bar(x + 0.2, [r["closed_loop_hold_s"] for r in rows], 0.4, label="executed (closed loop, robot)")
-    ax[0].axhline(result.settings.hold_s, c="grey", ls=":", label="requested")
-    ax[0].set(ylabel="hold [s]")
-    margins = [r["margin_c"] for r in rows]
-    ax[1].bar(x, margins, color=["tab:red" if m < 0 else _COLORS[r["model"]] for m, r in zip(margins, rows)])
-    ax[1].axhline(0.0, c="k", lw=0.8)
-    ax[1].set(ylabel="limit - peak TRUE winding [K] (< 0: limit broken)")
-    for a in ax:
-        a.set_xticks(x, labels)
-        a.grid(alpha=0.3, axis="y")
-    ax[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    return path
 
 
 def identify_models(recording_files, out_dir: Path,
@@ -498,25 +455,43 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
         check_idle_below_limits(elbow, {ELBOW: lim})
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
-    recordings = record_experiments(robot, settings)
-    files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
-                  for r in recordings)
-    sources = files if cmap is None else read_recordings(files, cmap).recordings
-    diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
-    save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
-    plant_model = truth_model(robot, settings.payload_kg)
-    executions = []
-    if settings.oracle:
-        model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
     cases = [(m, lim) for m in settings.models for lim in settings.limits_c]
-    show = bool(settings.progress)
-    for model, lim in tqdm(cases, desc="plan and execute", unit="case", disable=not show):
-        plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_files[model]))
-        run = execute(model_files[model], plant_model, mpc_settings(settings, lim, model_files[model], model), show)
-        log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
-                 run.achieved_hold_s, run.margin_c)
-        executions.append(Execution(model=model, limit_c=lim, plan=plan, run=run))
+    with tqdm(total=2 + len(cases), desc="loop", unit="step", disable=hidden(settings.progress)) as bar:
+        _stage(bar, "recording the experiments on the simulated robot")
+        recordings = record_experiments(robot, settings)
+        files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
+                      for r in recordings)
+        sources = files if cmap is None else read_recordings(files, cmap).recordings
+        _stage(bar, "diagnosing and re-identifying", done=True)
+        diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
+        save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
+        if settings.oracle:
+            model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
+        plant_model = truth_model(robot, settings.payload_kg)
+        executions = []
+        for model, lim in cases:
+            _stage(bar, f"plan and closed loop: {model} model, {lim:g} °C", done=True)
+            executions.append(_plan_and_execute(settings, plant_model, model_files[model], model, lim))
+        bar.update()
     return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
+
+
+def _stage(bar, what: str, done: bool = False) -> None:
+    """The loop's progress: the stage that starts now (``done``: the previous one ended), a line with -v."""
+    if done:
+        bar.update()
+    bar.set_postfix_str(what)
+    log.info("loop: %s", what)
+
+
+def _plan_and_execute(settings: LoopSettings, plant_model: ActuatedArm, model_file: Path, model: str,
+                      lim: float) -> Execution:
+    """One model under one limit: the open-loop plan and its closed loop on the robot's true physics."""
+    plan = plan_lift(settings.payload_kg, lim, settings.hold_s, parameter_file=str(model_file))
+    run = execute(model_file, plant_model, mpc_settings(settings, lim, model_file, model))
+    log.info("%s %g °C: planned %.1f s, executed %.1f s, margin %.2f K", model, lim, plan.achieved_hold_s,
+             run.achieved_hold_s, run.margin_c)
+    return Execution(model=model, limit_c=lim, plan=plan, run=run)
 
 
 def _log(recording: SimulatedRecording, path: Path, logged: tuple[str, ...], cmap: ColumnMap | None) -> Path:
@@ -549,7 +524,7 @@ def _write_loop(settings: LoopSettings, folder: Path, final: Path, cmap: ColumnM
     """The run's files into ``folder``; paths in the table name ``final``, where the folder will be."""
     result = run_loop(settings, folder, cmap)
     (folder / "diagnosis.json").write_text(json.dumps(result.diagnosis.to_dict(), indent=1))
-    result.diagnosis.plot(folder / "diagnosis.png")
+    plot_thermal_diagnosis(result.diagnosis, folder / "diagnosis.png")
     result.plot(folder / "loop.png")
     result.plot_summary(folder / "loop_summary.png")
     table = result.to_dict()

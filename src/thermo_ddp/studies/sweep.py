@@ -9,8 +9,10 @@ reported as a fraction of that nominal hold.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
+import logging
 import time
 from typing import Any
 
@@ -19,6 +21,7 @@ from tqdm import tqdm
 
 from .._config import require
 from .._figures import new_figure
+from .._progress import hidden
 from ..model.parameters import THERMAL_KEYS as FILE_THERMAL_KEYS
 from ..mpc.closed_loop import build_models, run_closed_loop
 from ..mpc.controller import mpc_solver, planning_problem
@@ -39,6 +42,7 @@ MAX_RUNS = 100_000  # a sweep's runs are kept in memory and written as one JSON
 CONTROLLER = dict(hold_s=15.0, observe_voltage=True, observer_start="settled", uncertainty_sigmas=2.0,
                   plant_resistance_scale=1.0)
 SHORT = dict(hold_s=5.0)  # --short: a 5 s hold instead of 15 s
+RESOLVE_FAILURES = ("solve_failed", "solve_timeout")  # a run's events that are a failed re-solve
 OBSERVER = ObserverSettings(winding_c=0.3, initial_resistance_scale=0.15)
 
 
@@ -83,8 +87,9 @@ def sweep_run(seed: int, short: bool = False) -> dict[str, Any]:
     settings = MPCSettings.from_options(**controller, **d)
     nominal = MPCSettings.from_options(**controller, plant_initial_c=d["plant_initial_c"], seed=int(seed))
     t0 = time.perf_counter()
-    r = run_closed_loop(settings, solver=solver, observer=OBSERVER, progress=False)
-    n = run_closed_loop(nominal, solver=solver, observer=OBSERVER, progress=False)
+    with _per_period_lines_off():
+        r = run_closed_loop(settings, solver=solver, observer=OBSERVER, progress=False)
+        n = run_closed_loop(nominal, solver=solver, observer=OBSERVER, progress=False)
     hold, nominal_hold = float(r.hold_s[-1]), float(n.hold_s[-1])
     return {"seed": int(seed), "success": bool(r.success), "status": r.status, "message": r.message,
             "max_winding_c": float(r.peak_winding_c), "limit_c": float(r.limit_c),
@@ -97,6 +102,23 @@ def sweep_run(seed: int, short: bool = False) -> dict[str, Any]:
             "events": {k: v["count"] for k, v in r.event_counts().items()},
             "draw": {**d, "plant_thermal_scales": dict(d["plant_thermal_scales"])},
             "wall_s": time.perf_counter() - t0}
+
+
+@contextlib.contextmanager
+def _per_period_lines_off():
+    """The controller's line per failed re-solve off during a run (the run counts them in its ``events``:
+    ``solve_failed``, ``solve_timeout``; the sweep's summary adds them up)."""
+    logger = logging.getLogger("thermo_ddp.mpc.controller")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _failed_resolves(run: dict[str, Any]) -> int:
+    return sum(run["events"].get(name, 0) for name in RESOLVE_FAILURES)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -133,6 +155,8 @@ class SweepResult:
                 "min_hold_ratio": float(np.min(ratios)) if ratios else None,
                 "min_margin_c": min((r["margin_c"] for r in done), default=None),
                 "runs_with_fallback": sum(r["fallbacks"] > 0 for r in done),
+                "failed_resolves": sum(_failed_resolves(r) for r in done),
+                "runs_with_failed_resolves": sum(_failed_resolves(r) > 0 for r in done),
                 "wall_s": self.wall_s}
 
     def to_dict(self) -> dict[str, Any]:
@@ -146,20 +170,25 @@ class SweepResult:
         s = self.summary()
         ratio = "n/a" if s["median_hold_ratio"] is None else f"{s['median_hold_ratio']:.2f}"
         margin = "n/a" if s["min_margin_c"] is None else f"{s['min_margin_c']:.2f} K"
-        return "\n".join([
-            f"sweep on {self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers): "
-            f"{s['runs']} runs in {self.wall_s:.1f} s, {s['failed_runs']} failed",
-            f"  runs over the winding limit {s['violations']}, cut-off trips {s['cutoff_trips']}, "
-            f"minimum margin {margin}",
-            f"  median hold / nominal hold {ratio}, runs needing the fallback {s['runs_with_fallback']}"])
+        failed = [r["seed"] for r in self.runs if "error" in r]
+        lines = [f"sweep on {self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers): "
+                 f"{s['runs']} runs in {self.wall_s:.1f} s, {s['failed_runs']} did not run to the end"
+                 + (f" (seeds {', '.join(map(str, failed[:5]))}{' ...' if len(failed) > 5 else ''}; messages in "
+                    "the JSON)" if failed else ""),
+                 f"  runs over the winding limit {s['violations']}, cut-off trips {s['cutoff_trips']}, "
+                 f"minimum margin {margin}",
+                 f"  median hold / nominal hold {ratio}",
+                 f"  re-solves that failed or came too late: {s['failed_resolves']} in "
+                 f"{s['runs_with_failed_resolves']} run(s); runs that used the fallback plan {s['runs_with_fallback']}"]
+        return "\n".join(lines)
 
     def plot(self, path) -> None:
         done = [r for r in self.runs if "error" not in r]
         fig, (a, b) = new_figure(1, 2, (9, 3.5))
         a.hist([r["margin_c"] for r in done], bins=20, color="tab:blue")
-        a.set(xlabel="margin under the winding limit, K", ylabel="runs", title="true winding margin")
-        b.hist([r["hold_ratio"] for r in done if r["hold_ratio"] is not None], bins=20, color="tab:green")
-        b.set(xlabel="hold / nominal hold", title="hold achieved")
+        a.set(xlabel="margin under the winding limit [K]", ylabel="runs [count]", title="true winding margin")
+        b.hist([100 * r["hold_ratio"] for r in done if r["hold_ratio"] is not None], bins=20, color="tab:green")
+        b.set(xlabel="hold achieved / nominal hold [%]", ylabel="runs [count]", title="hold achieved")
         fig.tight_layout()
         fig.savefig(path, dpi=120)
 
@@ -169,7 +198,7 @@ def _failed(seed: int, message: str) -> dict[str, Any]:
 
 
 def robustness_sweep(runs: int = 200, seed: int = 0, short: bool = False,
-                     engine: EngineSettings | None = EngineSettings(), progress: bool = True) -> SweepResult:
+                     engine: EngineSettings | None = EngineSettings(), progress: bool | None = True) -> SweepResult:
     """``runs`` randomised closed loops: on Dask (``engine``: a LocalCluster by default, or the cluster
     at ``engine.scheduler``), or in this process one after the other when ``engine`` is None."""
     integer = isinstance(runs, (int, np.integer)) and not isinstance(runs, bool)
@@ -179,7 +208,7 @@ def robustness_sweep(runs: int = 200, seed: int = 0, short: bool = False,
     seeds = run_seeds(seed, int(runs))
     started = time.perf_counter()
     if engine is None:
-        results = tuple(sweep_run(s, short) for s in tqdm(seeds, desc="sweep", disable=not progress))
+        results = tuple(sweep_run(s, short) for s in tqdm(seeds, desc="sweep", disable=hidden(progress)))
         info = {"kind": "serial", "address": "in-process", "workers": 1}
     else:
         with dask_client(engine) as client:

@@ -212,7 +212,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     q, v = x[model.index(joint, "q_rad")], x[model.index(joint, "v_rad_s")]
     winding = x[model.index(joint, "winding_c")]
     env = ca.vertcat(par["ambient_c"], par["payload_kg"])
-    step = model.step(settings.dt_s, settings.integrator, runtime_payload=True)
+    step = model.step_function(settings.dt_s, settings.integrator, runtime_payload=True)
     dyn = ca.Function("lift_dynamics", [x, u, p], [step(x, u, env)], ["x", "u", "p"], ["x_next"])
     jac = model.step_jacobians(settings.dt_s, settings.integrator, runtime_payload=True)
     dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, env)), ["x", "u", "p"],

@@ -166,7 +166,7 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
     layout = hold_parameters(n)
     x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", n), ca.SX.sym("p", layout.size)
     par = layout.symbols(p)
-    step, jac = model.step(dt_s), model.step_jacobians(dt_s)
+    step, jac = model.step_function(dt_s), model.step_jacobians(dt_s)
     dyn = _stage("hold_dynamics", x, u, p, step(x, u, par["ambient_c"]), "x_next")
     dyn_jac = ca.Function("hold_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
