@@ -20,12 +20,12 @@ Problems (the lift's default transcription, careful motion on, dt = 0.1 s, cold 
 - ``limit_active_40kg_84c_hold12.4s``: 40 kg, 84 °C, 12.4 s hold: the longest hold ``plan_lift`` finds
   under 84 °C (results/lift_ocp.json, DDP and IPOPT alike), ``winding_limit`` binding (169 knots).
 
-Reported per solver: median wall time of the solve (of ``--repeats``; Drake's IPOPT, about 2 minutes a
-solve, once), iterations (SNOPT: major and minor
-iterations and user function calls, from its print file), final cost (the transcription's f at the
-returned w), max violation (as ``IpoptSolver`` computes it), status; the time in our Python/CasADi
-callbacks (of the last run) and the rest, the solver's own; ratios against DDP and CasADi IPOPT; agreement: cost within 1e-3 relative of CasADi IPOPT's,
-the same feasibility, the same binding constraints, largest state difference.
+Reported per solver: median wall and process CPU time of the solve (of ``--repeats``; Drake's IPOPT, about
+2 minutes a solve, once), iterations (SNOPT: major and minor iterations, user function calls and its own CPU
+timers, from its print file), final cost (the transcription's f at the returned w), max violation (as
+``IpoptSolver`` computes it), status; the wall time inside our Python/CasADi evaluators (last run; the rest is
+the solver and Drake's calls into Python); ratios against DDP and CasADi IPOPT; agreement with CasADi IPOPT:
+cost within 1e-3 relative, the same feasibility and binding constraints, the largest state differences.
 
 Needs pydrake (PyPI ``drake``), which is not in the project's venv: ``make bench-drake`` creates
 ``.venv-drake`` with thermo-ddp and benchmarks/requirements-drake.txt and runs this file.
@@ -39,6 +39,7 @@ import dataclasses
 import importlib.metadata
 import logging
 import re
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -69,7 +70,7 @@ CHECK_RTOL = 1e-9         # the Drake program against the transcription, at the 
 # matters from 1 to 5 knots (20 knots: the dense AutoDiff products double the time).
 SNOPT_OPTIONS = {"Major optimality tolerance": 1e-6, "Major feasibility tolerance": 1e-8,
                  "Major iterations limit": 3000, "Iterations limit": 10 ** 7, "Major print level": 1,
-                 "Minor print level": 0, "Solution": "No"}
+                 "Minor print level": 0, "Solution": "No", "Timing level": 3}
 # Drake's IPOPT has no Hessian of Python costs: it runs with a limited-memory quasi-Newton Hessian.
 # Measured: about 2 minutes a solve, so it is timed once (``DRAKE_IPOPT_REPEATS``).
 DRAKE_IPOPT_OPTIONS = {"tol": 1e-8, "constr_viol_tol": 1e-8, "max_iter": 3000, "print_level": 0,
@@ -193,7 +194,8 @@ def check_program(dt: DrakeTranscription, x0, params, w0: np.ndarray) -> dict:
     """f, grad f, g and dg/dw through Drake's bindings at w0 against CasADi's transcription (MX, not expanded)."""
     tr = dt.tr
     x, p = tr.nlp["x"], tr.nlp["p"]
-    ref = ca.Function("ref", [x, p], [tr.nlp["f"], ca.gradient(tr.nlp["f"], x), tr.nlp["g"], ca.jacobian(tr.nlp["g"], x)])
+    f_sym, g_sym = tr.nlp["f"], tr.nlp["g"]
+    ref = ca.Function("ref", [x, p], [f_sym, ca.gradient(f_sym, x), g_sym, ca.jacobian(g_sym, x)])
     f_ref, df_ref, g_ref, jac_ref = (np.asarray(ca.densify(v)) for v in ref(w0, tr.parameters(x0, params)))
     f_ref, df_ref, g_ref = f_ref.item(), df_ref.ravel(), g_ref.ravel()
     _, _, bindings, _ = dt.program(x0, params)
@@ -216,9 +218,13 @@ def check_program(dt: DrakeTranscription, x0, params, w0: np.ndarray) -> dict:
 
 
 # What each solver's print file says: its exit text and iteration counts.
-_LOG_PATTERNS = {"snopt": {"message": r"SNOPTA INFO\s+\d+ -- (.+)", "major_iterations": r"No\. of major iterations\s+(\d+)",
+_LOG_PATTERNS = {"snopt": {"version": r"S N O P T\s+(\S+)", "message": r"SNOPTA INFO\s+\d+ -- (.+)",
+                           "major_iterations": r"No\. of major iterations\s+(\d+)",
                            "minor_iterations": r"No\. of iterations\s+(\d+)",
-                           "function_calls": r"User function calls \(total\)\s+(\d+)"},
+                           "function_calls": r"User function calls \(total\)\s+(\d+)",
+                           "snopt_solving_s": r"Time for solving problem\s+([\d.]+) seconds",
+                           "snopt_functions_s": r"Time for constraint functions\s+([\d.]+) seconds",
+                           "snopt_objective_s": r"Time for objective function\s+([\d.]+) seconds"},
                  "ipopt": {"message": r"EXIT: (.+)", "major_iterations": r"Number of Iterations\.+:\s*(\d+)"}}
 
 
@@ -227,7 +233,8 @@ def parse_log(name: str, text: str) -> dict:
     for key, pattern in _LOG_PATTERNS[name].items():
         found = re.findall(pattern, text)
         if found:
-            out[key] = found[-1].strip() if key == "message" else int(found[-1])
+            value = found[-1].strip()
+            out[key] = value if key in ("message", "version") else float(value) if key.endswith("_s") else int(value)
     return out
 
 
@@ -277,8 +284,9 @@ class DrakeSolver:
         info = {"solution_result": result.get_solution_result().name, "callback_s": clock.seconds,
                 "casadi_calls": clock.casadi_calls, **{k: v for k, v in log_info.items() if k != "message"}}
         return SolverResult(solver=f"drake_{self.name}", success=success, status="converged" if success else "failed",
-                            message=message, xs=xs, us=us, cost=cost, max_constraint_violation=self.dt.max_violation(w_opt, g),
-                            iterations=int(log_info.get("major_iterations", -1)), solve_s=solve_s, info=info)
+                            message=message, xs=xs, us=us, cost=cost,
+                            iterations=int(log_info.get("major_iterations", -1)), solve_s=solve_s, info=info,
+                            max_constraint_violation=self.dt.max_violation(w_opt, g))
 
 
 def feasible(result: SolverResult) -> bool:
@@ -288,13 +296,27 @@ def feasible(result: SolverResult) -> bool:
 def agreement(lp, result: SolverResult, reference: SolverResult) -> dict:
     """``result`` against CasADi IPOPT's: cost, feasibility, binding constraints, largest state differences."""
     joint = lp.model.joints[0]
-    diff = {name: float(np.max(np.abs(result.xs[:, lp.model.index(joint, name)] - reference.xs[:, i])))
-            for name, i in (("q_rad", lp.model.index(joint, "q_rad")), ("winding_c", lp.model.index(joint, "winding_c")))}
+    columns = {name: lp.model.index(joint, name) for name in ("q_rad", "winding_c")}
+    diff = {name: float(np.max(np.abs(result.xs[:, i] - reference.xs[:, i]))) for name, i in columns.items()}
     cost_rel = abs(result.cost - reference.cost) / abs(reference.cost)
     same_binding = binding_constraints(lp, result) == binding_constraints(lp, reference)
     return {"cost_rel_diff_vs_ipopt": float(cost_rel), "same_feasibility": feasible(result) == feasible(reference),
             "same_binding": same_binding, "max_abs_diff_vs_ipopt": diff,
             "agrees": bool(cost_rel <= COST_RTOL and feasible(result) == feasible(reference))}
+
+
+def timed_cpu(solve, repeats: int):
+    """``timed_solves`` plus the median process CPU time of a solve (steadier than wall time on a loaded machine)."""
+    cpu = []
+
+    def once():
+        start = time.process_time()
+        result = solve()
+        cpu.append(time.process_time() - start)
+        return result
+
+    result, timing = timed_solves(once, repeats)
+    return result, {**timing, "cpu_median_s": statistics.median(cpu)}
 
 
 def bench_problem(spec: dict, repeats: int, knots_per_block: int, drake_solvers) -> dict:
@@ -310,21 +332,24 @@ def bench_problem(spec: dict, repeats: int, knots_per_block: int, drake_solvers)
                **{f"drake_{name}": DrakeSolver(dt, name) for name in drake_solvers}}
     results = {}
     for label, solver in solvers.items():
-        runs = DRAKE_IPOPT_REPEATS if label == "drake_ipopt" else repeats
-        res, timing = timed_solves(lambda: solver.solve(lp.x0, lp.params, guess), runs)
+        res, timing = timed_cpu(lambda: solver.solve(lp.x0, lp.params, guess),
+                                DRAKE_IPOPT_REPEATS if label == "drake_ipopt" else repeats)
         results[label] = res
         out[label] = {**row(res, timing), "message": res.message, "binding": binding_constraints(lp, res)}
+        extra = ""
         if label.startswith("drake_"):
             out[label].update(res.info, outside_callbacks_s=timing["wall_median_s"] - res.info["callback_s"])
-        print(f"  {label:>12}: {timing['wall_median_s']:8.3f} s, "
-              f"{res.iterations:4d} it, cost {res.cost:.8g}, viol {res.max_constraint_violation:.1e}, {res.status} "
-              f"({res.message})", flush=True)
+            extra = f", {res.info['callback_s']:.1f} s in our callbacks"
+        print(f"  {label:>12}: {timing['wall_median_s']:8.3f} s, {res.iterations:4d} it, cost {res.cost:.8g}, "
+              f"viol {res.max_constraint_violation:.1e}, {res.status} ({res.message}){extra}", flush=True)
     for label, res in results.items():
         out[label]["time_over_ddp"] = out[label]["wall_median_s"] / out["ddp"]["wall_median_s"]
         out[label]["time_over_casadi_ipopt"] = out[label]["wall_median_s"] / out["ipopt"]["wall_median_s"]
+        out[label]["cpu_over_ddp"] = out[label]["cpu_median_s"] / out["ddp"]["cpu_median_s"]
+        out[label]["cpu_over_casadi_ipopt"] = out[label]["cpu_median_s"] / out["ipopt"]["cpu_median_s"]
         if label != "ipopt":
             out[label]["agreement"] = agreement(lp, res, results["ipopt"])
-    out["all_agree"] = all(out[k]["agreement"]["agrees"] for k in results if k != "ipopt")
+    out["ddp_ipopt_snopt_agree"] = all(out[k]["agreement"]["agrees"] for k in ("ddp", "drake_snopt") if k in out)
     return out
 
 
