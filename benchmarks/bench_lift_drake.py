@@ -66,8 +66,9 @@ FEASIBLE_VIOLATION = 1e-6  # a converged solve whose max violation is at most th
 CHECK_RTOL = 1e-9         # the Drake program against the transcription, at the initial guess
 # SNOPT: Drake's defaults (limited-memory Hessian, as SNOPT picks for n > 75) with the tolerances tightened
 # toward CasADi IPOPT's 1e-8 and room for the many minor (QP) iterations of 5000 constraints. Measured on the
-# 140 °C problem: "Hessian full memory" is worse (100+ major iterations, stopped), the blocks' size hardly
-# matters from 1 to 5 knots (20 knots: the dense AutoDiff products double the time).
+# 140 °C problem, all slower: "Hessian full memory" (100+ major iterations, stopped), "Hessian updates" 30 or
+# 100 (CPU 1.7x, 7.7x), "Scale option" 2 (2.8x). The blocks' size hardly matters from 1 to 5 knots (20 knots:
+# the dense AutoDiff products double the time).
 SNOPT_OPTIONS = {"Major optimality tolerance": 1e-6, "Major feasibility tolerance": 1e-8,
                  "Major iterations limit": 3000, "Iterations limit": 10 ** 7, "Major print level": 1,
                  "Minor print level": 0, "Solution": "No", "Timing level": 3}
