@@ -61,7 +61,7 @@ from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, build_lift_
 
 PROBLEMS = {"feasible_40kg_140c_hold20s": {"payload_kg": 40.0, "limit_c": 140.0, "hold_s": 20.0},
             "limit_active_40kg_84c_hold12.4s": {"payload_kg": 40.0, "limit_c": 84.0, "hold_s": 12.4}}
-COST_RTOL = 1e-3          # agreement: the brief of issue 23
+COST_RTOL = 1e-3          # agreement bound (issue 23)
 FEASIBLE_VIOLATION = 1e-6  # a converged solve whose max violation is at most this is feasible
 CHECK_RTOL = 1e-9         # the Drake program against the transcription, at the initial guess
 # SNOPT: Drake's defaults (limited-memory Hessian, as SNOPT picks for n > 75) with the tolerances tightened
