@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: plan test wheel-smoke bench bench-quick bench-croco clean
+.PHONY: plan test wheel-smoke bench bench-quick bench-croco bench-drake clean
 
 $(STAMP): pyproject.toml
 	@echo "== creating $(VENV) with $(PYTHON)"
@@ -34,5 +34,19 @@ bench-quick: $(STAMP)
 bench-croco: $(STAMP)
 	$(PY) benchmarks/bench_arm_crocoddyl.py
 
+# The optional Drake peer (SNOPT on the lift's transcription): its own venv, never needed by the tests.
+DRAKE_VENV  := .venv-drake
+DRAKE_STAMP := $(DRAKE_VENV)/.installed
+
+$(DRAKE_STAMP): pyproject.toml benchmarks/requirements-drake.txt
+	@echo "== creating $(DRAKE_VENV) with $(PYTHON): thermo-ddp + benchmarks/requirements-drake.txt (pydrake)"
+	$(PYTHON) -m venv $(DRAKE_VENV)
+	$(DRAKE_VENV)/bin/python -m pip install --upgrade pip
+	$(DRAKE_VENV)/bin/python -m pip install -e . -r benchmarks/requirements-drake.txt
+	touch $(DRAKE_STAMP)
+
+bench-drake: $(DRAKE_STAMP)
+	$(DRAKE_VENV)/bin/python benchmarks/bench_lift_drake.py
+
 clean:
-	rm -rf $(VENV) .venv-croco build dist src/*.egg-info .pytest_cache
+	rm -rf $(VENV) .venv-croco $(DRAKE_VENV) build dist src/*.egg-info .pytest_cache

@@ -3,8 +3,9 @@
     python benchmarks/run_all.py [--quick] [--only lift_ocp mpc_step ...] [--skip arm_crocoddyl]
 
 --quick passes --quick to the benchmarks that have it (fewer repeats) and fewer repeats to the
-others; any other benchmarks/bench_*.py is run too, with no arguments. The crocoddyl benchmark
-creates .venv-croco on first use (or uses $CROCODDYL_PYTHON).
+others; any other benchmarks/bench_*.py is run too, with no arguments, except the optional ones (OPTIONAL:
+their own venv and make target). The crocoddyl benchmark creates .venv-croco on first use (or uses
+$CROCODDYL_PYTHON).
 """
 from __future__ import annotations
 
@@ -23,8 +24,9 @@ BENCHMARKS = {  # name: (script, arguments for --quick)
     "ddp_backends": ("bench_ddp_backends.py", ["--quick", "--mpc-steps", "5", "--repeats", "5"]),
     "thermal_diagnosis": ("bench_thermal_diagnosis.py", ["--seeds", "8", "--pairs", "4", "--repeats", "2"]),
 }
+OPTIONAL = {"lift_drake": "make bench-drake"}  # pydrake is not in the project's venv
 BENCHMARKS.update({p.stem[len("bench_"):]: (p.name, []) for p in sorted(HERE.glob("bench_*.py"))
-                   if p.stem[len("bench_"):] not in BENCHMARKS})
+                   if p.stem[len("bench_"):] not in {**BENCHMARKS, **OPTIONAL}})
 
 
 def main():
