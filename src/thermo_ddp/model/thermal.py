@@ -130,7 +130,7 @@ def network_from_parameters(th: ThermalParameters) -> ThermalNetwork:
     """The contract's three networks: one node (eq. 7), winding/casing (eq. 6), and a drive node, with
     the heat sources of the file: Joule heat in the winding; ``friction_heating_fraction`` of the
     friction power in the casing (the winding of a one-node network); friction heat
-    c1 |v| + c2 v^2 at ``friction_heat_node``; iron losses P_Fe (|v| / v_ref)^k in the winding; the
+    c1 abs(v) + c2 v^2 at ``friction_heat_node``; iron losses P_Fe (abs(v) / v_ref)^k in the winding; the
     drive's idle and i^2 losses in the drive node, or without one in the sensor node. Values may be
     CasADi symbols; sources whose gain is a literal zero are left out."""
     if th.model == "one_node":
