@@ -71,7 +71,7 @@ def blocks(path: Path) -> list[Block]:
         body = []
         i += 1
         while i < len(lines) and not (lines[i].strip().startswith(fence) and not lines[i].strip().strip(fence[0])):
-            body.append(lines[i][indent:] if lines[i][:indent].isspace() else lines[i].lstrip())
+            body.append(lines[i][indent:] if not lines[i][:indent].strip() else lines[i].lstrip())
             i += 1
         found.append(Block(path, start + 1, RUN_LANGUAGES.get(word, word), "\n".join(body) + "\n"))
         i += 1
