@@ -5,7 +5,8 @@ The convention, visible to a reader in the block itself (docs/contributing.md):
   as processes; blocks in any other language (toml, json, text) are shown, not run;
 - ``# not tested: <why>`` on a block's first line skips the block, at the end of a line that line;
 - ``# needs ../shared/data/<file>`` runs the block or line only when that file is beside the project;
-- ``# exits N: <why>`` expects exit status N (1: a run that failed; 2: bad input, one line on stderr).
+- ``# exits N: <why>`` expects exit status N (1: a run that failed; 2: bad input, one line on stderr), on the
+  block's first line for every command, at the end of a line for that one.
 Any other command in an ``sh`` block is an error: run by the tests, or marked.
 """
 from __future__ import annotations
@@ -127,6 +128,8 @@ def makefile_recipe(target: str) -> list[str]:
 def commands(block: Block) -> tuple[list[Command], list[str]]:
     """What an sh block runs, and why lines are skipped; raises ValueError on an unmarked other command."""
     run, skipped = [], []
+    first = EXITS.search(block.first_line) if block.first_line.startswith("#") else None
+    default = int(first["code"]) if first else 0   # "# exits N: ..." on the first line: every command
     for line in shell_lines(block.text):
         note = _comment(line)
         argv = shlex.split(line, comments=True)
@@ -136,7 +139,7 @@ def commands(block: Block) -> tuple[list[Command], list[str]]:
         if (m := NEEDS.search(note)) and not (ROOT / m["path"]).exists():
             skipped.append(f"{' '.join(argv[:2])} ...: needs {m['path']} beside the project")
             continue
-        code = int(m["code"]) if (m := EXITS.search(note)) else 0
+        code = int(m["code"]) if (m := EXITS.search(note)) else default
         if argv[:2] == ["make", "plan"]:
             run += [Command(tuple(shlex.split(r)), code, line) for r in makefile_recipe("plan")]
         elif argv[0] in ("thermo-ddp", "python"):

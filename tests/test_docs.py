@@ -105,6 +105,12 @@ def test_short_settings_replace_and_add():
     assert docs.shortened(("thermo-ddp", "plan", "--hold-s", "30")) == ("thermo-ddp", "plan", "--hold-s", "30")
 
 
+def test_code_lines_fit_the_page():
+    """The site shows 80 characters of a code line without scrolling."""
+    long = [f"{b.id}: {ln}" for b in docs.run_blocks() for ln in b.text.splitlines() if len(ln) > 80]
+    assert not long, "\n".join(long)
+
+
 @pytest.mark.parametrize("page", docs.doc_files(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_relative_links_resolve(page):
     text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.S)
