@@ -24,13 +24,14 @@ test: $(STAMP) $(DOCS_STAMP)
 	$(PY) -m pytest -q
 
 # The documentation site: the docs extra (Sphinx, MyST, furo) into .venv, then the HTML into docs/_build/html,
-# every warning an error (a docstring autodoc cannot read, a broken link, a public name with no API entry).
+# every warning an error (a docstring autodoc cannot read, a broken link, a public name with no API entry);
+# -E: read every page again, since autodoc does not notice a changed docstring.
 $(DOCS_STAMP): $(STAMP)
 	$(PY) -m pip install -e ".[docs]"
 	touch $(DOCS_STAMP)
 
 docs: $(DOCS_STAMP)
-	$(VENV)/bin/sphinx-build -W --keep-going -q -b html docs docs/_build/html
+	$(VENV)/bin/sphinx-build -E -W --keep-going -q -b html docs docs/_build/html
 	@echo "== the site is in docs/_build/html (open docs/_build/html/index.html)"
 
 # Re-execute the notebooks in place (full configuration, quiet) and check them for leftovers.
