@@ -62,7 +62,7 @@ from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THER
                                 ThermalModel, canonical_terms, default_fixed, fit_grids, load_joint_parameters,
                                 parameter_file, start_values, structure_name)
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
-from ..model.parameters import THERMAL_KEYS
+from ..model.parameters import HEAT_SOURCE_KINDS, THERMAL_KEYS
 from ..recordings import as_recordings, read_recordings
 from ._thermal_localise import (ThermalLocaliseSettings, ThermalRegimeSettings, held_window_mean, local_slope,
                                 locate_thermal, noise_model, thermal_regimes)
@@ -608,11 +608,16 @@ class ThermalDiagnosis:
         return path
 
 
-def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) -> tuple[list[str], list[dict]]:
+def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid],
+                       allowed: Sequence[str]) -> tuple[list[str], list[dict]]:
+    """The candidates these data can test; a heat source the motor cannot have ([hardware] heat_sources,
+    ``allowed``) is never named."""
     usable, skipped = [], []
     moving = any(g.has_velocity and np.any(np.abs(g.velocity) > MOVING_RAD_S) for g in grids)
     for term in candidates:
         require(term in THERMAL_TERMS, "diagnose", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
+        if term in HEAT_SOURCE_KINDS and term not in allowed:
+            continue
         if term in SPEED_TERMS and not moving:
             skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
                             "experiment": EXPERIMENTS[term]})
@@ -729,7 +734,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     if short:
         return ThermalDiagnosis(names, params, grids, False, "insufficient_data", short, rows=rows,
                                 cv_blocks=settings.cv_blocks)
-    usable, skipped = _usable_candidates(candidates, grids)
+    usable, skipped = _usable_candidates(candidates, grids, params.scope.allowed_sources)
     base = frozenset()
     if "drive_heating" in usable and not any(g.has_ambient for g in grids):
         usable.remove("drive_heating")

@@ -140,9 +140,7 @@ def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,
         if b - a < min_samples:
             skipped += int(b - a)
             continue
-        columns = {f.name: getattr(rec, f.name)[a:b] for f in dataclasses.fields(rec)
-                   if isinstance(getattr(rec, f.name), np.ndarray)}
-        parts.append(dataclasses.replace(rec, name=f"{rec.name}[{k}]", row_offset=rec.row_offset + int(a), **columns))
+        parts.append(dataclasses.replace(rec.take(slice(int(a), int(b))), name=f"{rec.name}[{k}]"))
     return parts, skipped
 
 
