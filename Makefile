@@ -4,7 +4,9 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: plan test wheel-smoke bench bench-quick bench-croco bench-drake clean
+.PHONY: plan test docs notebooks wheel-smoke bench bench-quick bench-croco bench-drake clean
+
+DOCS_STAMP := $(VENV)/.docs-installed
 
 $(STAMP): pyproject.toml
 	@echo "== creating $(VENV) with $(PYTHON)"
@@ -18,8 +20,23 @@ $(STAMP): pyproject.toml
 plan: $(STAMP)
 	$(VENV)/bin/thermo-ddp compare --payload-kg 40 --hold-s 60
 
-test: $(STAMP)
+test: $(STAMP) $(DOCS_STAMP)
 	$(PY) -m pytest -q
+
+# The documentation site: the docs extra (Sphinx, MyST, furo) into .venv, then the HTML into docs/_build/html,
+# every warning an error (a docstring autodoc cannot read, a broken link, a public name with no API entry);
+# -E: read every page again, since autodoc does not notice a changed docstring.
+$(DOCS_STAMP): $(STAMP)
+	$(PY) -m pip install -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(VENV)/bin/sphinx-build -E -W --keep-going -q -b html docs docs/_build/html
+	@echo "== the site is in docs/_build/html (open docs/_build/html/index.html)"
+
+# Re-execute the notebooks in place (full configuration, quiet) and check them for leftovers.
+notebooks: $(STAMP)
+	$(PY) notebooks/execute.py
 
 # The wheel, installed into a fresh venv, plans from a temporary folder (CI runs it after `make test`).
 wheel-smoke:
@@ -49,4 +66,4 @@ bench-drake: $(DRAKE_STAMP)
 	$(DRAKE_VENV)/bin/python benchmarks/bench_lift_drake.py
 
 clean:
-	rm -rf $(VENV) .venv-croco $(DRAKE_VENV) build dist src/*.egg-info .pytest_cache
+	rm -rf $(VENV) .venv-croco $(DRAKE_VENV) build dist src/*.egg-info .pytest_cache docs/_build

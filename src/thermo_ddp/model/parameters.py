@@ -343,4 +343,5 @@ def dumps_parameters(params: JointParameters) -> str:
 
 
 def save_parameters(params: JointParameters, path: str | Path) -> None:
+    """Write ``params`` as a parameter file (TOML, the contract's sections) that :func:`load_parameters` reads."""
     Path(path).write_text(dumps_parameters(params))

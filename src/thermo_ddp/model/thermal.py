@@ -82,6 +82,11 @@ def feature_value(powers: Mapping[str, object], name: str, exponent: float = 1.0
 
 @dataclass(frozen=True)
 class ThermalNetwork:
+    """A lumped network: ``nodes`` with heat capacities (J/K), thermal resistances between them or to
+    ambient (``links``), heat ``sources`` injected at nodes, the node the sensor measures (``sensor_node``)
+    and the node the temperature limit applies to (``limit_node``). Its state is one temperature per node,
+    in °C, in the order of ``nodes`` (:attr:`state_names`)."""
+
     nodes: tuple[str, ...]
     capacities_j_per_k: tuple[object, ...]
     links: tuple[Link, ...]

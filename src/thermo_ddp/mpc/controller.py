@@ -276,7 +276,7 @@ class RecedingHorizonController:
         return capped, bool(np.any(capped != u))
 
     def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:
-        """Per joint, the |current| at which the winding's temperature stops rising at state ``x`` (model ODE:
+        """Per joint, the ``|current|`` at which the winding's temperature stops rising at state ``x`` (model ODE:
         dT_w/dt(i) = a + b i^2, from the rates at 0 and 1 A with the other joints' currents at 0)."""
         amb = self.lp.model.ambient_c if self.ambient_c is None else self.ambient_c
         n = self.lp.model.nu

@@ -278,6 +278,7 @@ class CasingMonitor:
       no run is implausible and this test is off.
     - ``casing_inconsistent``: the last ``innovation_window`` normalised innovations sum beyond
       +-``innovation_threshold`` * sqrt(window) (a sensor that disagrees with the model's prediction).
+
     Both verdicts distrust the sensor for the rest of the run.
     """
 

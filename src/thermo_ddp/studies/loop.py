@@ -12,6 +12,7 @@ closed loop (EKF + receding-horizon DDP of :mod:`thermo_ddp.mpc`) on a plant tha
 robot's TRUE physics (:func:`truth_model`).
 
 Truth mapping (testbed ``PlantParameters`` -> the plant's ``JointParameters`` and network):
+
 - motor: gear ratio, torque constant, rotor inertia, R(T) (resistance, reference, copper alpha),
   viscous and Coulomb friction and the tanh smoothing are the testbed's; back-EMF (K_b = K_m),
   bus voltage and current ratings, which the testbed does not model, come from the elbow file;
