@@ -31,6 +31,7 @@ import numpy as np
 
 from .. import codegen
 from . import _pass_cache
+from ._layout import Layout
 from ._riccati import NumpyOps, SymOps, backward_step, gradient_step, knot_model
 
 log = logging.getLogger(__name__)
@@ -38,26 +39,6 @@ log = logging.getLogger(__name__)
 # second-order tensor share most of their work (full DDP back knot of the rk4_4 lift: 10333 -> 7028
 # instructions, identical results).
 _CSE = {"cse": True}
-
-
-class Layout:
-    """Packing of per-knot values: value = [a; b; vec(Vxx)], policy = [k; vec(K); pivot; d1; d2; stat]."""
-
-    def __init__(self, nx, nu):
-        self.nx, self.nu = nx, nu
-        self.n_value = 2 * nx + nx * nx
-        self.n_policy = nu + nu * nx + 4
-
-    def gains(self, policy: np.ndarray):
-        """k (N, nu) and K (N, nu, nx) from a policy array (casadi vec is column-major)."""
-        nx, nu = self.nx, self.nu
-        k = policy[:, :nu].copy()
-        K = policy[:, nu: nu + nu * nx].reshape(-1, nx, nu).transpose(0, 2, 1).copy()
-        return k, K
-
-    def costates(self, values: np.ndarray) -> np.ndarray:
-        """Value gradients Vx = a + b at every knot, (N+1, nx)."""
-        return values[:, : self.nx] + values[:, self.nx: 2 * self.nx]
 
 
 def knot_functions(problem, settings, layout, compiled: bool = False):
@@ -92,10 +73,9 @@ def _fused_knots(problem, settings, layout, knots):
     reg, c, S, xn = sym.sym("reg"), sym.sym("c", nx), sym.sym("S", layout.n_value), sym.sym("x_next", nx)
     v_sym, hxx, huu, hux = knots["second"]
     model = {**knots["model"], "second_order": lambda v: tuple(ca.substitute(h, v_sym, v) for h in (hxx, huu, hux))}
-    st = backward_step(SymOps, model, S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx), c, u,
-                       ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg, settings.box_iterations, problem.has_box)
-    out = [ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"])),
-           ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])]
+    st = backward_step(SymOps, model, *layout.unpack_value(S), c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
+                       settings.box_iterations, problem.has_box)
+    out = [layout.pack_value(st["a"], st["b"], st["Vxx"]), layout.pack_policy(st)]
     step = _function("ddp_fused_step", [S, x, u, p, lam, c, rho, reg], out,
                      ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"])
     cost, g, gap = knots["eval"](x, u, p, xn)
@@ -169,11 +149,9 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         columns = np.concatenate([cols for _, cols in chunks])
         H = ca.reshape(hess, nz, nz)[:, np.argsort(columns).tolist()]  # chunk order -> column order
         model["second_order"] = lambda v: (H[:nx, :nx], H[nx:, nx:], H[nx:, :nx])
-    a, b, Vxx = S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx)
-    st = backward_step(SymOps, model, a, b, Vxx, c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
+    st = backward_step(SymOps, model, *layout.unpack_value(S), c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
                        settings.box_iterations, problem.has_box)
-    S_prev = ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"]))
-    policy = ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])
+    S_prev, policy = layout.pack_value(st["a"], st["b"], st["Vxx"]), layout.pack_policy(st)
     back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
                      ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
@@ -182,7 +160,7 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
-    S_N = ca.vertcat(term["lx"], ca.DM.zeros(nx), ca.vec(term["lxx"]))
+    S_N = layout.pack_value(term["lx"], ca.DM.zeros(nx), term["lxx"])
     terminal = _function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"])
     return back, composed, terminal
 
@@ -194,7 +172,8 @@ def _hessian_chunks(problem, layout, x, u, p):
     for the 7-joint arm (1.10e6 -> 1.12e6 without) and costs 11 s."""
     F, nx = problem.functions, problem.nx
     S, c = F.symbolic.sym("S", layout.n_value), F.symbolic.sym("c", nx)
-    v = S[:nx] + (S[nx: 2 * nx] + ca.reshape(S[2 * nx:], nx, nx) @ c)  # as backward_step: a + (b + Vxx c)
+    a, b, Vxx = layout.unpack_value(S)
+    v = a + (b + Vxx @ c)  # as backward_step
     z = ca.vertcat(x, u)
     grad = ca.gradient(ca.dot(v, F.step(x, u, p)), z)
     n_chunks = max(1, min(z.numel(), round(z.numel() * ca.n_nodes(grad) / HESSIAN_CHUNK_NODES)))
@@ -213,7 +192,7 @@ def _gradient_knot(problem, layout, knots, model_in, compiled):
     nx, nu = problem.nx, problem.nu
     x, u, p, lam, _, rho = knots["syms"]
     a, pol = problem.functions.symbolic.sym("a", nx), problem.functions.symbolic.sym("policy", layout.n_policy)
-    K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
+    K = layout.feedback(pol)
     a_prev, stat = gradient_step(SymOps, model_in[1], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
                                  problem.has_box)
     core = _function("ddp_grad_knot", [a, model_in[0], u, pol], [a_prev, stat], ["a", "model", "u", "policy"],
@@ -230,7 +209,7 @@ def _forward_knot(problem, layout, x, p):
     sym = F.symbolic
     xr, ur, alpha, c = sym.sym("x_ref", nx), sym.sym("u_ref", nu), sym.sym("alpha"), sym.sym("c", nx)
     pol = sym.sym("policy", layout.n_policy)
-    K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
+    K = layout.feedback(pol)
     u_new = ur + alpha * pol[:nu] + K @ (x - xr)
     if problem.has_box:
         u_new = ca.fmin(ca.fmax(u_new, ca.DM(problem.u_lb)), ca.DM(problem.u_ub))
@@ -302,9 +281,9 @@ def _backward_outputs(layout, S_rev, pol_rev, S_N):
     """policy (knot order), summary [sum d1, sum d2, max stationarity, min pivot] and values."""
     N = pol_rev.size2()
     policy = _reverse(pol_rev, N)
-    o = layout.nu + layout.nu * layout.nx
-    summary = ca.vertcat(ca.sum2(policy[o + 1, :]), ca.sum2(policy[o + 2, :]),
-                         ca.mmax(policy[o + 3, :]), ca.mmin(policy[o, :]))
+    column = layout.column
+    summary = ca.vertcat(ca.sum2(policy[column("d1"), :]), ca.sum2(policy[column("d2"), :]),
+                         ca.mmax(policy[column("stationarity"), :]), ca.mmin(policy[column("pivot"), :]))
     return [policy, summary, ca.horzcat(_reverse(S_rev, N), S_N)]
 
 
@@ -401,13 +380,14 @@ class CompiledBackend:
 
     name = "codegen"
 
-    def __init__(self, problem, library: ctypes.CDLL):
+    def __init__(self, problem, library: ctypes.CDLL, layout: Layout):
         self._lib = library
         _bind(library)
         nx, nu = problem.nx, problem.nu
         self._dims = {"x": nx, "u": nu, "p": problem.n_params, "g": problem.n_constraints,
-                      "gN": problem.n_terminal_constraints, "policy": nu + nu * nx + 4, "value": 2 * nx + nx * nx}
-        self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"])
+                      "gN": problem.n_terminal_constraints, "policy": layout.n_policy, "value": layout.n_value}
+        self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"],
+                                          *layout.c_sizes())
         if not self._work:
             raise MemoryError("no memory for the DDP work arrays")
         weakref.finalize(self, library.ddp_work_free, self._work)
@@ -475,7 +455,7 @@ def _bind(library: ctypes.CDLL) -> None:
         return
     ptr, dbl = ctypes.c_void_p, ctypes.c_double
     library.ddp_work_new.restype = ptr
-    library.ddp_work_new.argtypes = [ctypes.c_int] * 5
+    library.ddp_work_new.argtypes = [ctypes.c_int] * 8
     library.ddp_work_free.argtypes = [ptr]
     counts = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
               "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}  # input arrays, doubles, output arrays
@@ -529,7 +509,7 @@ class NumpyBackend:
         costates[N] = a = S[:nx]
         stat = 0.0
         for t in reversed(range(N)):
-            K = policy[t, lay.nu: lay.nu + lay.nu * nx].reshape(nx, lay.nu).T
+            K = lay.feedback(policy[t])
             a, st = gradient_step(NumpyOps, {n: d[t] for n, d in data.items()}, a, K, U[:, t], pr.u_lb, pr.u_ub,
                                   pr.has_box)
             costates[t], stat = a, max(stat, st)
@@ -550,14 +530,14 @@ class NumpyBackend:
             st = backward_step(NumpyOps, model, a, b, Vxx, C[:, t], U[:, t], pr.u_lb, pr.u_ub, reg,
                                self.settings.box_iterations, pr.has_box)
             a, b, Vxx = st["a"], st["b"], st["Vxx"]
-            values[:, t] = np.concatenate([a, b, Vxx.T.ravel()])
-            policy[:, t] = np.concatenate([st["k"], st["K"].T.ravel(),
-                                           [st["pivot"], st["d1"], st["d2"], st["stationarity"]]])
+            values[:, t] = lay.pack_value(a, b, Vxx)
+            policy[:, t] = lay.pack_policy(st)
             if st["pivot"] <= 0:
-                policy[lay.nu + lay.nu * nx, :t] = -1.0
+                policy[lay.pivot, :t] = -1.0
                 break
-        o = lay.nu + lay.nu * nx
-        summary = np.array([policy[o + 1].sum(), policy[o + 2].sum(), policy[o + 3].max(), policy[o].min()])
+        col = lay.column
+        summary = np.array([policy[col("d1")].sum(), policy[col("d2")].sum(), policy[col("stationarity")].max(),
+                            policy[col("pivot")].min()])
         return policy.T.copy(), summary, values.T.copy()
 
     def _second_order(self, x, u, p):
@@ -590,5 +570,5 @@ def make_backend(problem, settings, layout):
     if settings.backend == "codegen":
         library = compiled_library(problem, settings, layout)
         if library is not None:
-            return CompiledBackend(problem, library)
+            return CompiledBackend(problem, library, layout)
     return CasadiBackend(problem, settings, layout)

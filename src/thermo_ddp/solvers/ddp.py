@@ -1,5 +1,11 @@
 """Constrained multiple-shooting DDP / iLQR with an augmented Lagrangian.
 
+The loop (``DDPSolver._run``) is a sequence of named steps, as crocoddyl's solvers: ``_direction`` (backward
+pass and regularisation), ``_stopping`` (the convergence test, the end of an inner loop and the multiplier
+update, or the infeasibility certificate), ``_step`` (line search), ``_accepted`` (regularisation schedule,
+history, the callback, the first-order convergence check). ``solve(..., callback=f)`` calls ``f`` once per
+accepted iteration with a read-only :class:`IterationView`; ``f`` returning True stops the solve.
+
 Method (each part stated, as logged):
 - Local model: Gauss-Newton iLQR (cost Hessian J'J, no dynamics curvature) by default;
   ``full_second_order`` uses exact cost Hessians and the dynamics tensor contracted with the
@@ -54,14 +60,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
-from ._backends import Layout, make_backend
+from ._backends import make_backend
+from ._layout import Layout
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
 from .result import HISTORY_KEYS, STATUSES, SolverResult, WarmStart, constraint_violation
 
@@ -154,6 +161,80 @@ class _Iterate:
     C: np.ndarray
 
 
+@dataclasses.dataclass(frozen=True)
+class IterationView:
+    """Read-only figures of one accepted iteration, given to the solve's callback (HISTORY_KEYS and the
+    work of the iteration's line search)."""
+
+    iteration: int
+    cost: float
+    merit: float
+    violation: float
+    gap: float
+    stationarity: float
+    step: float
+    reg: float
+    alpha: float
+    penalty: float
+    forward_passes: int
+
+
+@dataclasses.dataclass(frozen=True)
+class _Direction:
+    """A backward pass's outcome at the current iterate: policy, model decrease terms and the stopping figures."""
+
+    policy: np.ndarray
+    d1: float
+    d2: float
+    stat: float     # projected |Qu|_inf
+    gap: float      # largest dynamics gap
+    kkt_c: float    # |max(g, -lam/rho)|_inf
+    flat: bool      # predicted decrease below rounding
+
+
+@dataclasses.dataclass
+class _Workspace:
+    """The state of one solve (never returned): iterate, multipliers, penalty, schedules, counts, history."""
+
+    it: _Iterate
+    P: np.ndarray
+    lam: np.ndarray
+    lamN: np.ndarray
+    rho: float
+    reg: float
+    omega: float                    # the inner loop's stationarity tolerance
+    viol_prev: float                # violation at the previous multiplier update
+    start: float
+    first: tuple | None = None      # the fused first pass's backward outputs, used by the first direction
+    mu_gap: float = 0.0
+    inner: int = 0
+    iteration: int = 0
+    alpha: float = 0.0
+    tries: int = 0
+    policy: np.ndarray | None = None
+    values: np.ndarray | None = None
+    costates: np.ndarray | None = None
+    status: str | None = None
+    message: str = ""
+    counts: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(PASS_COUNTS, 0))
+    hist: dict = dataclasses.field(default_factory=lambda: {k: [] for k in HISTORY_KEYS})
+    al_log: list = dataclasses.field(default_factory=list)  # (penalty, violation) at each multiplier update
+
+    def stop(self, status: str, message: str) -> None:
+        self.status, self.message = status, message
+
+    def record(self, solver: "DDPSolver", stat, gap, step, alpha) -> IterationView:
+        """Append this iteration's figures to the history; its read-only view."""
+        it_, pr = self.it, solver.problem
+        view = IterationView(
+            self.iteration, float(it_.J), float(it_.J + solver._al(it_.G, it_.GN, self.lam, self.lamN, self.rho)),
+            constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub), float(gap), float(stat),
+            float(step), float(self.reg), float(alpha), float(self.rho), self.tries)
+        for key in HISTORY_KEYS:
+            self.hist[key].append(getattr(view, key))
+        return view
+
+
 class DDPSolver:
     """Build once (all code generation and compilation here), then ``solve`` many times."""
 
@@ -169,6 +250,7 @@ class DDPSolver:
         self.problem, self.settings = problem, settings
         self.layout = Layout(problem.nx, problem.nu)
         self._ng, self._ngN = problem.n_constraints, problem.n_terminal_constraints  # sizes, computed once
+        self._has_constraints = self._ng + self._ngN > 0
         start = time.perf_counter()
         self.backend = make_backend(problem, settings, self.layout)
         self.kkt, self._rows = KKTEvaluator(problem), constraint_rows(problem)
@@ -182,14 +264,30 @@ class DDPSolver:
                  settings.gap_tolerance, settings.constraint_tolerance)
 
     # -- public ---------------------------------------------------------------------------------
-    def solve(self, x0, params=None, warm_start: WarmStart | SolverResult | None = None) -> SolverResult:
-        """Solve from initial state x0 with per-knot params (N+1, np) and an optional warm start."""
+    def solve(self, x0, params=None, warm_start: WarmStart | SolverResult | None = None,
+              callback: Callable[[IterationView], bool | None] | None = None) -> SolverResult:
+        """Solve from initial state x0 with per-knot params (N+1, np) and an optional warm start.
+
+        ``callback`` (as crocoddyl's ``CallbackAbstract``) is called once per accepted iteration with a
+        read-only :class:`IterationView`; returning True stops the solve (status "failed", reason "stopped")."""
         pr = self.problem
         x0 = pr.check_x0(x0, "DDPSolver.solve")
         P = np.ascontiguousarray(pr.check_params(params, "DDPSolver.solve"))
+        if callback is not None and not callable(callback):
+            raise InputError("DDPSolver.solve", "callback", type(callback).__name__, "expected a callable")
         X, U, lam, lamN, rho, cold = self._initial_guess(x0, warm_start)
         start = time.perf_counter()
-        return self._run(X, U, P, lam, lamN, rho, cold, start)
+        s = self.settings
+        evaluation, first = self.backend.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass
+        it_ = _Iterate(X, U, *evaluation)
+        ws = _Workspace(it_, P, lam, lamN, rho, reg=s.reg_init, start=start, first=first,
+                        omega=max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance),
+                        viol_prev=self._violation(it_) if cold else np.inf)  # a cold start's first loop: a quarter
+        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
+            ws.first = None
+            ws.stop("numerical_error", "the model gives non-finite values at the initial guess")
+            return self._finish(ws)
+        return self._run(ws, callback)
 
     # -- internals ------------------------------------------------------------------------------
     def _initial_guess(self, x0, warm):
@@ -229,97 +327,126 @@ class DDPSolver:
             vals.append(np.max(np.abs(np.maximum(GN, -lamN / rho))))
         return float(max(vals))
 
-    def _run(self, X, U, P, lam, lamN, rho, cold, start) -> SolverResult:
-        s, pr, be = self.settings, self.problem, self.backend
-        has_constraints = self._ng + self._ngN > 0
-        evaluation, first = be.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass, fused
-        it_ = _Iterate(X, U, *evaluation)
-        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
-            return self._result(it_, P, lam, lamN, rho, None, "numerical_error",
-                                "the model gives non-finite values at the initial guess", 0, start,
-                                {k: [] for k in HISTORY_KEYS})
-        reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
-        viol_prev = self._violation(it_) if cold else np.inf  # a cold start's first loop must cut it to a quarter
-        al_log: list[tuple[float, float]] = []  # (penalty, violation) at each multiplier update
-        hist = {k: [] for k in HISTORY_KEYS}
-        status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
-        policy = values = costates = None
-        iteration = inner = 0
-        counts = dict.fromkeys(PASS_COUNTS, 0)  # the work done: passes of each kind, multiplier updates
-        while iteration < s.max_iterations and counts["backward_passes"] < 4 * s.max_iterations + 20:
-            counts["backward_passes"] += 1
-            policy_try, summary, values_try = first or be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
-            first = None
-            d1, d2, stat, pivot = summary
-            if not (pivot > 0 and np.all(np.isfinite(summary))):
-                reg = self._increase(reg, policy_try)
-                log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", iteration, pivot, reg)
-                if reg > s.reg_max:
-                    status, message = "regularisation_failed", "Quu not positive definite up to reg_max"
-                    break
+    def _run(self, ws: "_Workspace", callback) -> SolverResult:
+        """The loop: per pass a direction, the stopping test (or a multiplier update), a step, the callback."""
+        s = self.settings
+        while ws.status is None:
+            if ws.iteration >= s.max_iterations or ws.counts["backward_passes"] >= 4 * s.max_iterations + 20:
+                ws.stop("max_iterations", f"no convergence in {s.max_iterations} iterations")
+                break
+            direction = self._direction(ws)
+            if direction is None or self._stopping(ws, direction) or not self._step(ws, direction):
                 continue
-            policy, values = policy_try, values_try
-            gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
-            kkt_c = self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho)
-            flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)) and reg <= s.reg_min
-            inner_done = (stat <= omega or flat) and gap <= s.gap_tolerance
-            if inner_done or (has_constraints and inner >= s.inner_max_iterations and kkt_c > s.constraint_tolerance):
-                if inner_done and (stat <= s.tolerance or flat) and kkt_c <= s.constraint_tolerance:
-                    status = "converged"
-                    message = ("predicted decrease below rounding" if stat > s.tolerance else "stationarity") + \
-                        ", gaps and constraints within tolerance"
-                    self._record(hist, it_, lam, lamN, rho, stat, gap, 0.0, reg, 0.0)
-                    break
-                if inner_done:
-                    omega = max(s.tolerance, omega * s.inner_tolerance_factor)
-                if has_constraints and kkt_c > s.constraint_tolerance:
-                    inner = 0
-                    al_log.append((rho, self._violation(it_)))
-                    if self._stalled(al_log):
-                        status = "infeasible"
-                        message = (f"locally infeasible: the violation {al_log[-1][1]:.3g} did not halve while "
-                                   f"the penalty grew {s.infeasibility_growth:g}x")
-                        break
-                    lam, lamN, rho, viol_prev = self._update_multipliers(it_, lam, lamN, rho, viol_prev)
-                    counts["multiplier_updates"] += 1
-                    continue
-            alpha, trial, mu_gap, tries = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
-            counts["forward_passes"] += tries
-            if trial is None:
-                if has_constraints and abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)):
-                    inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
-                reg = self._increase(reg)
-                log.debug("iteration %d: line search failed, reg -> %.1e", iteration, reg)
-                if reg > s.reg_max:
-                    status, message = "line_search_failed", "no acceptable step up to reg_max"
-                    break
-                continue
-            iteration, inner = iteration + 1, inner + 1
-            step = alpha * float(np.max(np.abs(policy[:, : pr.nu])))
-            it_ = trial
-            if alpha == 1.0:
-                reg = reg / s.reg_decrease if reg / s.reg_decrease >= s.reg_min else 0.0
-            elif alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
-                reg = self._increase(reg)
-            self._record(hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha)
-            log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", iteration, it_.J,
-                      stat, gap, alpha, reg, rho)
-            if alpha == 1.0 and stat <= s.tolerance ** 0.5 and \
-                    self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho) <= s.constraint_tolerance:
-                counts["gradient_passes"] += 1  # the step closed the gaps: a first-order pass may show convergence
-                stat_new, a = be.gradient(it_.X, it_.U, P, lam, lamN, policy, rho)
-                if stat_new <= s.tolerance:
-                    status = "converged"
-                    message = "stationarity (previous gains), gaps and constraints within tolerance"
-                    self._record(hist, it_, lam, lamN, rho, stat_new, 0.0, 0.0, reg, 0.0)
-                    costates = a
-                    break
-        lam_out = np.maximum(0.0, lam + rho * it_.G)
-        lamN_out = np.maximum(0.0, lamN + rho * it_.GN)
-        if costates is None and values is not None:
-            costates = self.layout.costates(values)
-        return self._result(it_, P, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
-                            hist, counts, al_log)
+            self._accepted(ws, direction, callback)
+        return self._finish(ws)
+
+    def _direction(self, ws: "_Workspace") -> "_Direction | None":
+        """Backward pass with regularisation; None after a failed pass (regularisation raised, or exhausted:
+        then the workspace is stopped)."""
+        s = self.settings
+        ws.counts["backward_passes"] += 1
+        it_ = ws.it
+        policy, summary, values = ws.first or self.backend.backward(it_.X, it_.U, ws.P, ws.lam, ws.lamN, it_.C,
+                                                                    ws.rho, ws.reg)
+        ws.first = None
+        d1, d2, stat, pivot = summary
+        if not (pivot > 0 and np.all(np.isfinite(summary))):
+            ws.reg = self._increase(ws.reg, policy)
+            log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", ws.iteration, pivot, ws.reg)
+            if ws.reg > s.reg_max:
+                ws.stop("regularisation_failed", "Quu not positive definite up to reg_max")
+            return None
+        ws.policy, ws.values = policy, values
+        gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
+        kkt_c = self._kkt_constraint(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
+        flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J))
+        return _Direction(policy, float(d1), float(d2), float(stat), gap, kkt_c, flat)
+
+    def _stopping(self, ws: "_Workspace", d: "_Direction") -> bool:
+        """The stopping test and the end of an inner loop: True when the solve stopped (converged or certified
+        infeasible) or the multipliers were updated (no step at this direction)."""
+        s = self.settings
+        flat = d.flat and ws.reg <= s.reg_min
+        inner_done = (d.stat <= ws.omega or flat) and d.gap <= s.gap_tolerance
+        over = self._has_constraints and ws.inner >= s.inner_max_iterations and d.kkt_c > s.constraint_tolerance
+        if not (inner_done or over):
+            return False
+        if inner_done and (d.stat <= s.tolerance or flat) and d.kkt_c <= s.constraint_tolerance:
+            ws.record(self, d.stat, d.gap, 0.0, 0.0)
+            ws.stop("converged", ("predicted decrease below rounding" if d.stat > s.tolerance else "stationarity")
+                    + ", gaps and constraints within tolerance")
+            return True
+        if inner_done:
+            ws.omega = max(s.tolerance, ws.omega * s.inner_tolerance_factor)
+        if not (self._has_constraints and d.kkt_c > s.constraint_tolerance):
+            return False
+        ws.inner = 0
+        ws.al_log.append((ws.rho, self._violation(ws.it)))
+        if self._stalled(ws.al_log):
+            ws.stop("infeasible", f"locally infeasible: the violation {ws.al_log[-1][1]:.3g} did not halve while "
+                    f"the penalty grew {s.infeasibility_growth:g}x")
+            return True
+        ws.lam, ws.lamN, ws.rho, ws.viol_prev = self._update_multipliers(ws.it, ws.lam, ws.lamN, ws.rho, ws.viol_prev)
+        ws.counts["multiplier_updates"] += 1
+        return True
+
+    def _step(self, ws: "_Workspace", d: "_Direction") -> bool:
+        """The line search along the direction; on failure the regularisation grows (False)."""
+        s = self.settings
+        alpha, trial, ws.mu_gap, tries = self._line_search(ws.it, ws.P, d.policy, d.d1, d.d2, ws.lam, ws.lamN,
+                                                           ws.rho, ws.mu_gap)
+        ws.counts["forward_passes"] += tries
+        ws.tries = tries
+        if trial is None:
+            if self._has_constraints and d.flat:
+                ws.inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
+            ws.reg = self._increase(ws.reg)
+            log.debug("iteration %d: line search failed, reg -> %.1e", ws.iteration, ws.reg)
+            if ws.reg > s.reg_max:
+                ws.stop("line_search_failed", "no acceptable step up to reg_max")
+            return False
+        ws.it, ws.alpha = trial, alpha
+        return True
+
+    def _accepted(self, ws: "_Workspace", d: "_Direction", callback) -> None:
+        """After an accepted step: regularisation schedule, history, callback and the first-order check of
+        convergence after a full step."""
+        s = self.settings
+        ws.iteration, ws.inner = ws.iteration + 1, ws.inner + 1
+        if ws.alpha == 1.0:
+            ws.reg = ws.reg / s.reg_decrease if ws.reg / s.reg_decrease >= s.reg_min else 0.0
+        elif ws.alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
+            ws.reg = self._increase(ws.reg)
+        step = ws.alpha * float(np.max(np.abs(d.policy[:, : self.problem.nu]), initial=0.0))
+        view = ws.record(self, d.stat, d.gap, step, ws.alpha)
+        log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", ws.iteration, ws.it.J,
+                  d.stat, d.gap, ws.alpha, ws.reg, ws.rho)
+        if callback is not None and callback(view):
+            ws.stop("stopped", f"stopped by the callback after iteration {ws.iteration}")
+            return
+        if ws.alpha == 1.0 and d.stat <= s.tolerance ** 0.5 and \
+                self._kkt_constraint(ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho) <= s.constraint_tolerance:
+            self._first_order_check(ws, d)
+
+    def _first_order_check(self, ws: "_Workspace", d: "_Direction") -> None:
+        """The step closed the gaps: a first-order pass with the last gains may show convergence already."""
+        ws.counts["gradient_passes"] += 1
+        stat, costates = self.backend.gradient(ws.it.X, ws.it.U, ws.P, ws.lam, ws.lamN, d.policy, ws.rho)
+        if stat <= self.settings.tolerance:
+            ws.record(self, stat, 0.0, 0.0, 0.0)
+            ws.costates = costates
+            ws.stop("converged", "stationarity (previous gains), gaps and constraints within tolerance")
+
+    def _finish(self, ws: "_Workspace") -> SolverResult:
+        it_ = ws.it
+        lam_out = np.maximum(0.0, ws.lam + ws.rho * it_.G)
+        lamN_out = np.maximum(0.0, ws.lamN + ws.rho * it_.GN)
+        if not (np.all(np.isfinite(lam_out)) and np.all(np.isfinite(lamN_out))):  # a non-finite iterate
+            lam_out, lamN_out = ws.lam, ws.lamN
+        if ws.costates is None and ws.values is not None:
+            ws.costates = self.layout.costates(ws.values)
+        return self._result(it_, ws.P, lam_out, lamN_out, ws.rho, (ws.policy, ws.costates), ws.status, ws.message,
+                            ws.iteration, ws.start, ws.hist, ws.counts, ws.al_log)
 
     def _increase(self, reg: float, policy=None) -> float:
         """reg x reg_factor; after a failed backward pass (``policy``) at least reg - 2 p, with p the
@@ -376,13 +503,6 @@ class DDPSolver:
                     return alpha, _Iterate(X, U, J, G, GN, C), mu_gap, tries
             alpha *= s.line_search_factor
         return alpha, None, mu_gap, tries
-
-    def _record(self, hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha):
-        viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, self.problem.u_lb, self.problem.u_ub)
-        for key, value in (("cost", it_.J), ("merit", it_.J + self._al(it_.G, it_.GN, lam, lamN, rho)),
-                           ("violation", viol), ("gap", gap), ("stationarity", stat), ("step", step),
-                           ("reg", reg), ("alpha", alpha), ("penalty", rho)):
-            hist[key].append(float(value))
 
     def _result(self, it_, P, lam, lamN, rho, pol, status, message, iterations, start, hist,
                 counts: Mapping[str, int] | None = None, al_log=()) -> SolverResult:
