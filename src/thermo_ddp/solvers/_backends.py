@@ -2,6 +2,7 @@
 
 Every backend offers the same calls on whole trajectories, as C-contiguous numpy arrays with one
 row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps):
+(rho: the penalties of the rows of g and then of g_N, one vector)
   backward(X, U, P, Lam, LamN, C, rho, reg) -> (policy (N, n_policy), summary [d1, d2, stat, pivot],
                                                 values (N+1, n_value))
   evaluate_backward(X, U, P, Lam, LamN, rho, reg) -> ((J, G, GN, C), backward's outputs): both in
@@ -48,7 +49,7 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     sym = F.symbolic
     x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
     lam, lamN = sym.sym("lam", problem.n_constraints), sym.sym("lamN", problem.n_terminal_constraints)
-    rho = sym.sym("rho")
+    rho = sym.sym("rho", problem.n_constraints)  # a penalty per row of g (of g_N: ``rhoN`` of the terminal knot)
     model = knot_model(F, x, u, p, lam, rho, settings.full_second_order)
     second = model.pop("second_order_sym", None)
     knots = {"model": model, "second": second, "syms": (x, u, p, lam, lamN, rho)}
@@ -101,6 +102,12 @@ FUSED = ("ddp_fused_step", "ddp_fused_eval_step")
 def _function(name, inputs, outputs, names_in, names_out, cse=True):
     """A knot function with dense outputs (the driver writes whole rows), shared subexpressions by default."""
     return ca.Function(name, inputs, [ca.densify(o) for o in outputs], names_in, names_out, _CSE if cse else {})
+
+
+def penalties(problem, rho) -> np.ndarray:
+    """The penalty vector of the passes (rows of g, then of g_N) from one value per row or one for all."""
+    n = problem.n_constraints + problem.n_terminal_constraints
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(rho, dtype=float).ravel(), (n,)))
 
 
 def _local_model_knot(problem, knots):
@@ -159,9 +166,10 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
-    term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
+    rhoN = F.symbolic.sym("rhoN", problem.n_terminal_constraints)
+    term = knot_model(F, x, None, p, lamN, rhoN, settings.full_second_order, terminal=True)
     S_N = layout.pack_value(term["lx"], ca.DM.zeros(nx), term["lxx"])
-    terminal = _function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"])
+    terminal = _function("ddp_back_terminal", [x, p, lamN, rhoN], [S_N], ["x", "p", "lamN", "rhoN"], ["S"])
     return back, composed, terminal
 
 
@@ -241,14 +249,15 @@ def build_passes(problem, knots, layout):
     ng, ngN = problem.n_constraints, problem.n_terminal_constraints
     X, U, P = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", problem.nu, N), ca.MX.sym("P", n_p, N + 1)
     Lam, LamN, C = ca.MX.sym("Lam", ng, N), ca.MX.sym("LamN", ngN), ca.MX.sym("C", nx, N)
-    rho, reg, alpha = ca.MX.sym("rho"), ca.MX.sym("reg"), ca.MX.sym("alpha")
+    rho, reg, alpha = ca.MX.sym("rho", ng + ngN), ca.MX.sym("reg"), ca.MX.sym("alpha")
+    rho_g, rho_N = rho[:ng], rho[ng:]
     Pol = ca.MX.sym("policy", layout.n_policy, N)
 
     def sweep(gaps):
-        S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)
+        S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho_N)
         S_rev, pol_rev = knots["back"].mapaccum("ddp_back_acc", N)(
             S_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), _reverse(gaps, N),
-            rho, reg)
+            rho_g, reg)
         return _backward_outputs(layout, S_rev, pol_rev, S_N)
 
     cost, G, gaps = knots["eval"].map(N)(X[:, :N], U, P[:, :N], X[:, 1:])
@@ -261,9 +270,9 @@ def build_passes(problem, knots, layout):
         ["X", "U", "P", "Lam", "LamN", "rho", "reg"], ["policy", "summary", "values", "J", "G", "GN", "C"])
     evaluate = ca.Function("ddp_evaluate", [X, U, P], evaluation, ["X", "U", "P"], ["J", "G", "GN", "C"])
 
-    a_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)[:nx]
+    a_N = knots["terminal"](X[:, N], P[:, N], LamN, rho_N)[:nx]
     a_rev, stat = knots["grad"].mapaccum("ddp_grad_acc", N)(
-        a_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), rho, _reverse(Pol, N))
+        a_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), rho_g, _reverse(Pol, N))
     gradient = ca.Function("ddp_gradient", [X, U, P, Lam, LamN, Pol, rho],
                            [ca.mmax(stat), ca.horzcat(_reverse(a_rev, N), a_N)],
                            ["X", "U", "P", "Lam", "LamN", "policy", "rho"], ["stat", "costates"])
@@ -314,19 +323,21 @@ class CasadiBackend:
     name = "casadi"
 
     def __init__(self, problem, settings, layout, knots=None):
+        self.problem = problem
         knots = knots or knot_functions(problem, settings, layout)
         self._f = {name: _BufferCall(f) for name, f in build_passes(problem, knots, layout).items()}
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, rho, reg)
+        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, penalties(self.problem, rho), reg)
         return policy, summary.ravel(), values
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        policy, summary, values, J, G, GN, C = self._f["evaluate_backward"](X, U, P, Lam, LamN, rho, reg)
+        policy, summary, values, J, G, GN, C = self._f["evaluate_backward"](X, U, P, Lam, LamN,
+                                                                            penalties(self.problem, rho), reg)
         return (float(J[0, 0]), G, GN.ravel(), C), (policy, summary.ravel(), values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, rho)
+        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, penalties(self.problem, rho))
         return float(stat[0, 0]), costates
 
     def forward(self, X, U, P, policy, C, alpha):
@@ -381,11 +392,12 @@ class CompiledBackend:
     name = "codegen"
 
     def __init__(self, problem, library: ctypes.CDLL, layout: Layout):
-        self._lib = library
+        self._lib, self.problem = library, problem
         _bind(library)
         nx, nu = problem.nx, problem.nu
         self._dims = {"x": nx, "u": nu, "p": problem.n_params, "g": problem.n_constraints,
-                      "gN": problem.n_terminal_constraints, "policy": layout.n_policy, "value": layout.n_value}
+                      "gN": problem.n_terminal_constraints, "policy": layout.n_policy, "value": layout.n_value,
+                      "rho": problem.n_constraints + problem.n_terminal_constraints}
         self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"],
                                           *layout.c_sizes())
         if not self._work:
@@ -414,19 +426,19 @@ class CompiledBackend:
         return results
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         return tuple(self._call("ddp_backward", N, _knots(N, X, U, P, Lam, LamN) + [(C, N, "x"), rho, reg],
                                 [(N, "policy"), (0, 4), (N + 1, "value")]))
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         policy, summary, values, J, G, GN, C = self._call(
             "ddp_evaluate_backward", N, _knots(N, X, U, P, Lam, LamN) + [rho, reg],
             [(N, "policy"), (0, 4), (N + 1, "value"), (0, 1), (N, "g"), (0, "gN"), (N, "x")])
         return (float(J[0]), G, GN, C), (policy, summary, values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         stat, costates = self._call("ddp_gradient", N, _knots(N, X, U, P, Lam, LamN) + [(policy, N, "policy"), rho],
                                     [(0, 1), (N + 1, "x")])
         return float(stat[0]), costates
@@ -457,7 +469,7 @@ def _bind(library: ctypes.CDLL) -> None:
     library.ddp_work_new.restype = ptr
     library.ddp_work_new.argtypes = [ctypes.c_int] * 8
     library.ddp_work_free.argtypes = [ptr]
-    counts = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
+    counts = {"ddp_backward": (7, 1, 3), "ddp_evaluate_backward": (6, 1, 7), "ddp_gradient": (7, 0, 2),
               "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}  # input arrays, doubles, output arrays
     for name, (arrays, doubles, outputs) in counts.items():
         fn = getattr(library, name)
@@ -492,10 +504,11 @@ class NumpyBackend:
     def _knot_data(self, X, U, P, Lam, LamN, rho):
         """Per-knot derivatives (name -> (N, ...) arrays) and the terminal value S_N (arguments transposed)."""
         N = self.problem.horizon
-        mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho)]
+        ng, rho = self.problem.n_constraints, penalties(self.problem, rho)
+        mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho[:ng])]
         data = {n: m.T if n in ("lx", "lu") else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
                 for m, s, n in zip(mats, self._shapes, self._names)}
-        return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho)).ravel()
+        return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho[ng:])).ravel()
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
         evaluation = self.evaluate(X, U, P)

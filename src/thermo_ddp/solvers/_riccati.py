@@ -252,7 +252,7 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False):
     """Symbolic local model of the augmented-Lagrangian cost (and dynamics) at one knot.
 
     Cost 0.5|r|^2 + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho) (PHR augmented Lagrangian
-    for g <= 0). Gauss-Newton Hessians J'J and rho Jg' diag(active) Jg; with ``full`` the
+    for g <= 0, one penalty rho per row of g). Gauss-Newton Hessians J'J and Jg' diag(rho active) Jg; with ``full`` the
     exact Hessians (plus the residual and multiplier curvature terms).
     """
     z = x if terminal else ca.vertcat(x, u)
@@ -268,7 +268,7 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False):
         mult = ca.fmax(0, lam + rho * g)
         active = lam + rho * g > 0
         grad += Jg.T @ mult
-        hess += rho * Jg.T @ ca.diag(active) @ Jg
+        hess += Jg.T @ ca.diag(rho * active) @ Jg
         if full:
             mu = type(x).sym("mu", g.numel())
             hess += ca.substitute(ca.hessian(ca.dot(mu, g), z)[0], mu, mult)

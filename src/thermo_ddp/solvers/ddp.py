@@ -21,9 +21,10 @@ Method (each part stated, as logged):
   IROS 2019; solvers/_augmented_lagrangian.py): inner DDP iterations on cost + sum (max(0, lam + rho g)^2
   - lam^2) / (2 rho); when the inner stationarity is below the current inner tolerance (or after
   ``inner_max_iterations`` inner iterations), multipliers are updated lam <- max(0, lam + rho g)
-  and rho grows by ``penalty_factor`` when the violation did not fall to a quarter of its value
+  and, one penalty per constraint row (rows in degC, V, rad, rad/s each get their own), rho grows by
+  ``penalty_factor`` where the row is violated and its violation did not fall to a quarter of its value
   at the previous update (at the first update of a cold start: of the initial guess's), and shrinks by
-  sqrt(``penalty_factor``), not below ``penalty_init``, when it fell below a hundredth of it.
+  sqrt(``penalty_factor``), not below ``penalty_init``, where it fell below a hundredth of it.
   "infeasible" only with a certificate: at two updates after converged inner loops, the penalty grew
   ``infeasibility_growth`` times and the violation did not halve (an inner loop stopped by
   ``inner_max_iterations`` is no evidence).
@@ -212,10 +213,10 @@ class _Workspace:
     P: np.ndarray
     lam: np.ndarray
     lamN: np.ndarray
-    rho: float
+    rho: np.ndarray                 # a penalty per row of g, then of g_N
     reg: float
     omega: float                    # the inner loop's stationarity tolerance
-    viol_prev: float                # violation at the previous multiplier update
+    viol_prev: np.ndarray           # the rows' violations at the previous multiplier update
     start: float
     first: tuple | None = None      # the fused first pass's backward outputs, used by the first direction
     mu_gap: float = 0.0
@@ -241,7 +242,7 @@ class _Workspace:
         view = IterationView(
             self.iteration, float(it_.J), float(it_.J + al.terms(it_.G, it_.GN, self.lam, self.lamN, self.rho)),
             constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub), float(gap), float(stat),
-            float(step), float(self.reg), float(alpha), float(self.rho), self.tries)
+            float(step), float(self.reg), float(alpha), float(np.max(self.rho, initial=0.0)), self.tries)
         for key in HISTORY_KEYS:
             self.hist[key].append(getattr(view, key))
         return view
@@ -292,9 +293,9 @@ class DDPSolver:
         s = self.settings
         evaluation, first = self.backend.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass
         it_ = _Iterate(X, U, *evaluation)
-        ws = _Workspace(it_, P, lam, lamN, rho, reg=s.reg_init, start=start, first=first,
-                        omega=max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance),
-                        viol_prev=al.violation(it_.G, it_.GN) if cold else np.inf)  # cold: a quarter of the guess's
+        viol0 = al.row_violation(it_.G, it_.GN) if cold else np.full(rho.size, np.inf)  # cold: vs the guess's
+        ws = _Workspace(it_, P, lam, lamN, rho, reg=s.reg_init, start=start, first=first, viol_prev=viol0,
+                        omega=max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance))
         if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
             ws.first = None
             ws.stop("numerical_error", "the model gives non-finite values at the initial guess")
@@ -305,7 +306,7 @@ class DDPSolver:
     def _initial_guess(self, x0, warm):
         pr, s = self.problem, self.settings
         N, ng, ngN = pr.horizon, self._ng, self._ngN
-        lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), s.penalty_init, True
+        lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), np.full(ng + ngN, s.penalty_init), True
         if warm is None:
             xs, us = np.tile(x0, (N + 1, 1)), np.zeros((N, pr.nu))
         else:
@@ -321,7 +322,9 @@ class DDPSolver:
             if m.get("terminal_constraints") is not None and np.shape(m["terminal_constraints"]) == (ngN,):
                 lamN = np.maximum(np.asarray(m["terminal_constraints"], float), 0.0)
             if m.get("penalty") is not None:
-                rho = float(np.clip(m["penalty"], s.penalty_init, s.penalty_max))
+                if np.size(m["penalty"]) in (1, ng + ngN):  # one for all rows, or one per row
+                    rho = np.clip(np.broadcast_to(np.asarray(m["penalty"], float).ravel(), (ng + ngN,)),
+                                  s.penalty_init, s.penalty_max)
         X = np.array(xs, dtype=float)
         X[0] = x0
         U = np.ascontiguousarray(np.clip(us, pr.u_lb, pr.u_ub))
@@ -382,7 +385,7 @@ class DDPSolver:
         if not (self._has_constraints and d.kkt_c > s.constraint_tolerance):
             return False
         ws.inner = 0
-        ws.al_log.append(al.Update(ws.rho, al.violation(ws.it.G, ws.it.GN), inner_done))
+        ws.al_log.append(al.Update.at(s, ws.it.G, ws.it.GN, ws.rho, inner_done))
         if al.stalled(s, ws.al_log):
             ws.stop("infeasible", f"locally infeasible: the violation {ws.al_log[-1].violation:.3g} did not halve "
                     f"while the penalty grew {s.infeasibility_growth:g}x")
@@ -422,7 +425,7 @@ class DDPSolver:
         step = ws.alpha * float(np.max(np.abs(d.policy[:, : self.problem.nu]), initial=0.0))
         view = ws.record(self, d.stat, d.gap, step, ws.alpha)
         log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", ws.iteration, ws.it.J,
-                  d.stat, d.gap, ws.alpha, ws.reg, ws.rho)
+                  d.stat, d.gap, ws.alpha, ws.reg, view.penalty)
         if callback is not None and callback(view):
             ws.stop("stopped", f"stopped by the callback after iteration {ws.iteration}")
             return
@@ -441,8 +444,7 @@ class DDPSolver:
 
     def _finish(self, ws: "_Workspace") -> SolverResult:
         it_ = ws.it
-        lam_out = np.maximum(0.0, ws.lam + ws.rho * it_.G)
-        lamN_out = np.maximum(0.0, ws.lamN + ws.rho * it_.GN)
+        lam_out, lamN_out = al.multipliers(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
         if not (np.all(np.isfinite(lam_out)) and np.all(np.isfinite(lamN_out))):  # a non-finite iterate
             lam_out, lamN_out = ws.lam, ws.lamN
         if ws.costates is None and ws.values is not None:
@@ -493,7 +495,7 @@ class DDPSolver:
         solve_s = time.perf_counter() - start
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
         K = k = None
-        mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho}
+        mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho.copy()}
         if pol is not None and pol[0] is not None:
             k, K = self.layout.gains(pol[0])
             mult["dynamics"] = pol[1][1:]

@@ -3,7 +3,8 @@
  *
  * Arrays are numpy C-contiguous, one row per knot (row t of X is x_t), which is CasADi's
  * column-major (dim, knots) layout: a knot's vector is the contiguous row. Sizes per knot:
- * X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), LamN (ngN), C (N, nx) gaps, policy (N, n_policy),
+ * X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), LamN (ngN), C (N, nx) gaps, rho (ng + ngN) the
+ * penalties of the rows of g then of g_N, policy (N, n_policy),
  * values (N+1, n_value). The packing of policy and values is thermo_ddp.solvers._layout.Layout's: the driver
  * only gets its sizes and the offset of the policy's four scalars (pivot, d1, d2, stationarity) from
  * ddp_work_new, and reads nothing else of it.
@@ -210,10 +211,10 @@ static void mark_failed(const Work *W, int t, double *policy, double *values) {
 /* The backward pass with given gaps C, or (C == NULL) evaluating the iterate on the way: then
  * cost_out = J, and G, GN, C_out are filled for every knot even after a failed pivot. */
 static int backward_sweep(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                          const double *LamN, const double *C, double rho, double reg, double *policy,
+                          const double *LamN, const double *C, const double *rho, double reg, double *policy,
                           double *summary, double *values, double *cost_out, double *G, double *GN,
                           double *C_out) {
-    int rc = value_end(W, N, X, P, LamN, &rho, values + (size_t)N * W->n_value);
+    int rc = value_end(W, N, X, P, LamN, rho + W->ng, values + (size_t)N * W->n_value);
     const int pivot = W->pivot;
     int failed = 0;
     double J = 0.0, cost = 0.0;
@@ -225,12 +226,12 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
             continue;
         }
         if (ddp_fused_step_fn) {
-            rc = fused_knot(W, t, X, U, P, Lam, C_out ? NULL : C + (size_t)t * W->nx, &rho, &reg, policy, values,
+            rc = fused_knot(W, t, X, U, P, Lam, C_out ? NULL : C + (size_t)t * W->nx, rho, &reg, policy, values,
                             &cost, G, C_out);
             J += cost;
         } else {
-            rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
-                       : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+            rc = C_out ? local_knot(W, t, X, U, P, Lam, rho, &cost, G, C_out)
+                       : local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
             J += cost;
             if (!rc) rc = back_knot(W, t, X, U, P, (C_out ? C_out : C) + (size_t)t * W->nx, &reg, policy, values);
         }
@@ -246,27 +247,27 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
 }
 
 int ddp_backward(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                 const double *LamN, const double *C, double rho, double reg, double *policy, double *summary,
+                 const double *LamN, const double *C, const double *rho, double reg, double *policy, double *summary,
                  double *values) {
     return backward_sweep(W, N, X, U, P, Lam, LamN, C, rho, reg, policy, summary, values, NULL, NULL, NULL, NULL);
 }
 
 /* The first pass of a solve: per knot the evaluation (cost, g, gap), then the Riccati step with that gap. */
 int ddp_evaluate_backward(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                          const double *LamN, double rho, double reg, double *policy, double *summary,
+                          const double *LamN, const double *rho, double reg, double *policy, double *summary,
                           double *values, double *J, double *G, double *GN, double *C) {
     return backward_sweep(W, N, X, U, P, Lam, LamN, NULL, rho, reg, policy, summary, values, J, G, GN, C);
 }
 
 /* First-order pass with the gains of `policy`: costates (N+1, nx) and the largest stationarity. */
 int ddp_gradient(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                 const double *LamN, const double *policy, double rho, double *stat, double *costates) {
-    int rc = value_end(W, N, X, P, LamN, &rho, W->value_end);
+                 const double *LamN, const double *policy, const double *rho, double *stat, double *costates) {
+    int rc = value_end(W, N, X, P, LamN, rho + W->ng, W->value_end);
     double knot_stat = 0.0;
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        rc = local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+        rc = local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
         if (rc) break;
         W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = W->model;
         W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = policy + (size_t)t * W->n_policy;
