@@ -22,7 +22,8 @@ class SolverResult:
     ``cost`` is the objective without any penalty terms. ``max_constraint_violation`` is the
     largest of: inequality violation max(g, 0), control-bound violation and dynamics gap.
     ``multipliers`` maps names to arrays ("constraints" (N, ng), "terminal_constraints"
-    (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts).
+    (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts: DDP's "penalty",
+    one per row of the stage and then the terminal constraints; IPOPT's "nlp_lam_g", "nlp_lam_x").
     ``history`` maps HISTORY_KEYS to one value per iteration (NaN where not defined).
     Trajectories are never NaN: a failed solve returns its last finite iterate and says so.
 
