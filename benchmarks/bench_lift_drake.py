@@ -285,7 +285,7 @@ class DrakeSolver:
         info = {"solution_result": result.get_solution_result().name, "callback_s": clock.seconds,
                 "casadi_calls": clock.casadi_calls, **{k: v for k, v in log_info.items() if k != "message"}}
         return SolverResult(solver=f"drake_{self.name}", success=success, status="converged" if success else "failed",
-                            message=message, xs=xs, us=us, cost=cost,
+                            reason="" if success else info["solution_result"], message=message, xs=xs, us=us, cost=cost,
                             iterations=int(log_info.get("major_iterations", -1)), solve_s=solve_s, info=info,
                             max_constraint_violation=self.dt.max_violation(w_opt, g))
 
