@@ -29,7 +29,8 @@ import time
 
 from _common import write
 from _ocp_bench import SCENARIO, SCENARIO_S, lift_problem, nlp_warm_start, row, timed_solves
-from thermo_ddp.tasks._common import DEFAULT_HOLD_S, MotionQuality
+from thermo_ddp.tasks.limits import DEFAULT_HOLD_S
+from thermo_ddp.tasks.motion import MotionQuality
 from thermo_ddp.tasks.lift import (LiftSettings, binding_constraints, initial_guess, make_solver,
                                    neighbour_warm_start, plan_lift)
 

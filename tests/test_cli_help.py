@@ -53,4 +53,4 @@ def test_help_exits_0_and_prints_the_defaults(capsys):
     assert exc.value.code == 0
     out = capsys.readouterr().out
     assert "safety_cutoff_c, 84 for the elbow" in out and "°C" in out
-    assert "(default 60.0)" in out  # the one default hold, tasks._common.DEFAULT_HOLD_S
+    assert "(default 60.0)" in out  # the one default hold, tasks.limits.DEFAULT_HOLD_S

@@ -139,7 +139,7 @@ def test_cli_compare_prints_one_row_per_limit(capsys):
 def test_default_limit_and_hold_have_one_home(tmp_path, elbow_file):
     """No limit given: the elbow file's cut-off (another file, another limit); the hold: DEFAULT_HOLD_S."""
     from thermo_ddp.model.parameters import load_parameters, save_parameters
-    from thermo_ddp.tasks._common import DEFAULT_HOLD_S, limit_pair_c
+    from thermo_ddp.tasks.limits import DEFAULT_HOLD_S, limit_pair_c
 
     params = load_parameters(elbow_file)
     assert build_lift_problem(LiftSettings(hold_s=1.0)).settings.limit_c == params.limits.safety_cutoff_c == 84.0
@@ -168,7 +168,8 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     """Issue 15's must-show, measured on the motion the planned currents produce on the model (simulated here):
     up, hold, down (one reversal), at most 0.3 rad/s within 0.1 rad of a joint stop, at rest at the end, inside
     the range; the plan's own MotionQuality says the same."""
-    from thermo_ddp.tasks._common import MotionQuality, joint_range_rad
+    from thermo_ddp.tasks.limits import joint_range_rad
+    from thermo_ddp.tasks.motion import MotionQuality
 
     plan = default_plan
     assert plan.settings.careful_motion and plan.status == "infeasible_hold" and plan.achieved_hold_s > 5.0
@@ -229,7 +230,7 @@ def test_acceleration_limit_bounds_the_motion_and_ddp_finds_ipopts_optimum():
 
 
 def test_motion_quality_counts_reversals_and_speed_near_the_stops():
-    from thermo_ddp.tasks._common import MotionQuality
+    from thermo_ddp.tasks.motion import MotionQuality
 
     t = np.linspace(0.0, 2.0, 201)
     q = -0.05 - 0.5 * np.sin(np.pi * t / 2) ** 2       # up and back down: one reversal
@@ -276,7 +277,7 @@ def test_time_to_limit_is_the_whole_model_held_still():
     """The lift's time to limit (thermal-only RK4 hold) against the whole model held at the goal by its
     static current, integrated by implicit Euler at a 10x finer step (mechanics included)."""
     from thermo_ddp.model.actuated import load_model
-    from thermo_ddp.tasks._common import first_crossing
+    from thermo_ddp.tasks.thermal_hold import first_crossing
     from thermo_ddp.tasks.lift import time_to_limit_s
     model = load_model(payload_kg=40.0)
     goal = -np.pi / 2

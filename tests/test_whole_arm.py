@@ -14,7 +14,7 @@ from thermo_ddp.model.arm import ELBOW, LEFT_ARM
 from thermo_ddp.errors import InputError
 from thermo_ddp.recordings import TopicMap, read_bag_joints
 from thermo_ddp.monitor import monitor_bag
-from thermo_ddp.tasks._common import hold_temperatures, winding_indices
+from thermo_ddp.tasks.thermal_hold import hold_temperatures, winding_indices
 from thermo_ddp.tasks.posture import (evaluate_posture, gravity_torque_function, naive_posture, optimal_posture,
                                       payload_point_function, static_current_function, _posture_nlp)
 from thermo_ddp.tasks.whole_arm import WholeArmSettings, plan_whole_arm

@@ -20,7 +20,7 @@ import numpy as np
 
 from .errors import InputError, RunFailed
 from .outputs import Outputs
-from .tasks._common import DEFAULT_HOLD_S
+from .tasks.limits import DEFAULT_HOLD_S
 
 log = logging.getLogger(__name__)
 

@@ -29,7 +29,7 @@ from .._config import require
 from ..model.actuated import ActuatedArm
 from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
-from ..tasks._common import default_limit_c
+from ..tasks.limits import default_limit_c
 from .settings import MPCSettings
 
 log = logging.getLogger(__name__)

@@ -36,11 +36,14 @@ from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import Bound, load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
-from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
-                      check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
-                      format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
-                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach,
-                      time_to_limit_by_joint, winding_limits_c)
+from .constraints import joint_limit_constraints, stop_approach
+from .limits import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_in_joint_range,
+                     check_knots, check_limit_c, joint_limit_c, joint_range_rad, limit_pair_c, winding_limits_c)
+from .motion import MotionQuality
+from .problem import TaskProblem, initial_guess
+from .series import PlanSeries, format_s
+from .thermal_hold import time_to_limit_by_joint
+from .verdicts import binding_constraints, is_feasible, solver_summary
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +93,7 @@ class LiftSettings:
     """The lift scenario and its transcription (all times in s, angles in rad).
 
     ``limit_c``: the winding limit (None: the elbow parameter file's, see
-    :func:`thermo_ddp.tasks._common.default_limit_c`; :func:`build_lift_problem` fills it in)."""
+    :func:`thermo_ddp.tasks.limits.default_limit_c`; :func:`build_lift_problem` fills it in)."""
 
     payload_kg: float = 40.0
     limit_c: float | None = None
@@ -510,7 +513,7 @@ def joule_energy_j(plan: LiftPlan) -> float:
 def compare_limits(payload_kg: float = 40.0, limits_c=None, hold_s: float = DEFAULT_HOLD_S,
                    **options) -> LimitComparison:
     """:func:`plan_lift` under each winding limit; by default the elbow file's cut-off and short-term
-    winding limit (:func:`thermo_ddp.tasks._common.limit_pair_c`: 84 °C and 140 °C)."""
+    winding limit (:func:`thermo_ddp.tasks.limits.limit_pair_c`: 84 °C and 140 °C)."""
     params = load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW))
     limits_c = limit_pair_c(params) if limits_c is None else tuple(limits_c)
     require(0 < len(limits_c) <= MAX_LIMITS, _SRC, "limits_c", limits_c,

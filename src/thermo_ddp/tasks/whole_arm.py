@@ -31,10 +31,12 @@ from ..model.arm import ELBOW, LEFT_ARM, PAYLOAD_KG
 from ..model.parameters import Bound
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, WarmStart
-from ._common import (DEFAULT_HOLD_S, HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_fields,
-                      check_knots, check_limit_c, finite_or_none,
-                      format_s, initial_guess, is_feasible, joint_limit_constraints, limiting_joint, solver_summary,
-                      time_to_limit_by_joint, violated_constraints, winding_limits_c)
+from .constraints import joint_limit_constraints
+from .limits import DEFAULT_HOLD_S, HOLD_S, check_fields, check_knots, check_limit_c, winding_limits_c
+from .problem import TaskProblem, initial_guess
+from .series import PlanSeries, finite_or_none, format_s
+from .thermal_hold import limiting_joint, time_to_limit_by_joint
+from .verdicts import binding_constraints, is_feasible, solver_summary, violated_constraints
 from .lift import SETTING_BOUNDS as LIFT_BOUNDS
 from .lift import min_jerk
 from .posture import (PostureChoice, evaluate_posture, hanging_posture, naive_posture, optimal_posture,
