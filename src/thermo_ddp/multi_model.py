@@ -175,6 +175,13 @@ class MultiModelProblem:
         x = np.asarray(scenario_xs, dtype=float)
         return np.concatenate([x[..., 0, :self.shared], x[..., self.shared:].reshape(*x.shape[:-2], -1)], axis=-1)
 
+    def with_horizon(self, horizon: int) -> "MultiModelProblem":
+        """The same scenarios over ``horizon`` knots, sharing the built stacked functions."""
+        other = dataclasses.replace(self, horizon=horizon)
+        if "problem" in self.__dict__:
+            other.__dict__["problem"] = self.problem.with_horizon(horizon)
+        return other
+
     # -- the stacked problem ------------------------------------------------------------------
     @functools.cached_property
     def problem(self) -> OptimalControlProblem:

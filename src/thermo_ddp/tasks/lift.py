@@ -266,6 +266,12 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
 
 
+def lift_terms(model: ActuatedArm, settings: LiftSettings):
+    """The lift's costs, terminal costs, constraints, terminal constraints (functions of one model's x, u, p)
+    and its current peak: what the robust lift (:mod:`thermo_ddp.tasks.robust`) imposes per scenario."""
+    return _functions(model, settings)[2:]
+
+
 _PROBLEMS = Memo()  # the lift's OCP by what its functions are built from (the horizon aside)
 
 
@@ -439,12 +445,17 @@ class LiftPlan(PlanSeries):
 
 
 def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: float = DEFAULT_HOLD_S,
-              **options) -> LiftPlan:
+              uncertainty=None, **options) -> LiftPlan:
     """Plan lifting ``payload_kg`` at the gripper to horizontal, holding ``hold_s``, lowering back,
     with the winding kept under ``limit_c`` (None: the elbow parameter file's limit).
-    Options: the fields of :class:`LiftSettings`."""
+    ``uncertainty``: a fraction (every thermal value within +-fraction) or ``"file"`` (the parameter file's
+    ``[uncertainty]``): the plan keeps every motor of that set under the limit
+    (:func:`thermo_ddp.tasks.robust.plan_robust_lift`). Options: the fields of :class:`LiftSettings`."""
     settings = settings_from_mapping(LiftSettings, {"payload_kg": payload_kg, "limit_c": limit_c,
                                                     "hold_s": hold_s, **options}, _SRC)
+    if uncertainty is not None:
+        from .robust import plan_robust_lift
+        return plan_robust_lift(settings, uncertainty)
     lp = build_lift_problem(settings)
     settings, limit_c = lp.settings, lp.settings.limit_c
     solver = make_solver(lp)
