@@ -209,14 +209,14 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
     idle_c, idle_theta = worst.hottest_idle_c(model.ambient_c)
     if idle_c >= limit:
         return _idle_too_hot(nominal, spec, uset, idle_c, idle_theta)
-    wall, solvers = time.perf_counter(), {}
-    base = lp.with_hold(nominal.achieved_hold_s)
-    rnd = _Round(base, dataclasses.replace(_as_result(nominal), xs=nominal.xs, us=nominal.us),
-                 int(round(nominal.achieved_hold_s / settings.dt_s)) if nominal.achieved_hold_s or nominal.feasible
-                 else -1, [])
+    solvers, worst_s = {}, 0.0
+    knots = -1 if nominal.status == "infeasible" else int(round(nominal.achieved_hold_s / settings.dt_s))
+    rnd = _Round(lp.with_hold(nominal.achieved_hold_s), _as_result(nominal), knots, [])
     thetas, failure = [uset.nominal], ""
     while True:
+        tic = time.perf_counter()
         motor = worst.search(rnd.qv, rnd.result.us, _nominal_params(rnd.lp), model.ambient_c)
+        worst_s += time.perf_counter() - tic
         if motor.peak_c <= limit + TOLERANCE_K or rnd.knots < 0:
             break
         if len(thetas) > MAX_SCENARIOS or any(np.allclose(motor.theta, th) for th in thetas):
@@ -228,11 +228,9 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
         rlp = robust_problem(lp, uset, thetas, worst)
         solver = solvers.setdefault(len(thetas), make_solver(rlp))
         search = longest_feasible_hold(rlp, solver, _hold_estimate_s(rnd, w, limit))
-        best_lp, best = search.best
-        rnd = _Round(best_lp, best, search.knots, rnd.searches + [search])
+        rnd = _Round(*search.best, search.knots, rnd.searches + [search])
         log.info("%d scenarios: robust hold %.1f s (worst motor %.1f °C before)", len(thetas),
                  max(search.knots, 0) * settings.dt_s, motor.peak_c)
-    worst_s = time.perf_counter() - wall - sum(s.solve_s for s in rnd.searches)
     return _plan(nominal, rnd, spec, uset, np.array(thetas), motor, worst, worst_s, failure)
 
 
