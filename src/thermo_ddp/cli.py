@@ -42,7 +42,7 @@ def _plan(args, out: Outputs) -> int:
     options = {"solver": args.solver, "careful_motion": args.careful_motion}
     if args.model:
         options["parameter_file"] = args.model
-    plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
+    plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, uncertainty=args.uncertainty, **options)
     print(plan.report())
     out.figure("--plot", plan.plot)
     return _result(plan.to_dict(), out, stdout=False)
@@ -51,7 +51,7 @@ def _plan(args, out: Outputs) -> int:
 def _compare(args, out: Outputs) -> int:
     from .tasks.lift import compare_limits
     limits = tuple(args.limits_c) if args.limits_c else None
-    print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver).table())
+    print(compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver, uncertainty=args.uncertainty).table())
     return 0
 
 
@@ -224,6 +224,12 @@ def _number(unit: str):
     return parse
 
 
+def _fraction_or_file(text: str):
+    """``--uncertainty``'s value: a number (checked by the planner: 0 < FRACTION < 1), or ``file`` (what
+    the option alone means: the model file's [uncertainty])."""
+    return text if text == "file" else _number("(a fraction)")(text)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with a one-line error (the contract: exit 2 with a one-line message)."""
 
@@ -278,6 +284,10 @@ def _plan_parser(name: str, description: str) -> _Parser:
     cmd.add_argument("--hold-s", type=_number("s"), default=DEFAULT_HOLD_S, help="requested hold at the goal, s (default %(default)s)")
     cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
                      help="solver of the transcribed problem (default %(default)s)")
+    cmd.add_argument("--uncertainty", nargs="?", const="file", default=None, type=_fraction_or_file,
+                     metavar="FRACTION", help="plan for every motor of a set: each thermal capacity and resistance, the "
+                     "winding resistance and the drive's losses within +-FRACTION (0 < FRACTION < 1); without a number, "
+                     "the model file's [uncertainty] intervals (default: none, the file's values only)")
     if name == "plan":
         cmd.add_argument("--limit-c", type=_number("°C"), default=None,
                          help="winding limit, °C (default: the model file's [limits] safety_cutoff_c, 84 for the elbow)")

@@ -500,7 +500,7 @@ class LimitComparison:
                  "peak_winding_c": float(p.series("winding_c").max()),
                  "peak_casing_c": float(p.sensor_c().max()),
                  "joule_energy_j": joule_energy_j(p), "binding": ", ".join(p.binding_constraints),
-                 "solve_s": p.solver["total_solve_s"]} for p in self.plans]
+                 "solve_s": p.solver["total_solve_s"], **_robust_row(p)} for p in self.plans]
 
     def table(self) -> str:
         p0 = self.plans[0].settings
@@ -510,7 +510,16 @@ class LimitComparison:
         lines = [f"{r['limit_c']:9.0f} {str(r['feasible']):>9} {r['hold_s']:7.1f} {r['peak_winding_c']:11.1f} "
                  f"{r['peak_casing_c']:10.1f} {r['joule_energy_j'] / 1e3:9.2f} {r['solve_s']:8.2f}  {r['binding']}"
                  for r in self.rows()]
-        return "\n".join([head, *lines])
+        robust = [f"{r['limit_c']:9.0f}: robust over {r['uncertainty_set']}: hold {r['hold_s']:.1f} s (nominal "
+                  f"{r['nominal_hold_s']:.1f} s), worst motor's winding {r['worst_winding_c']:.1f} °C, "
+                  f"{r['scenarios']} scenario(s)" for r in self.rows() if "nominal_hold_s" in r]
+        return "\n".join([head, *lines, *robust])
+
+
+def _robust_row(plan: LiftPlan) -> dict:
+    """A robust plan's additions to a comparison row (none for a nominal plan)."""
+    robust = getattr(plan, "robust", None)
+    return {} if robust is None else {**robust.to_dict(), "uncertainty_set": robust.uset.label}
 
 
 def joule_energy_j(plan: LiftPlan) -> float:
