@@ -6,8 +6,9 @@ import numpy as np
 from .._figures import new_figure
 
 
-def plot_lift(plan, path) -> None:
-    """Four panels: angle; current and voltage; winding and casing vs the limit and the cut-off."""
+def plot_lift(plan, path, band=None) -> None:
+    """Four panels: angle; current and voltage; winding and casing vs the limit and the cut-off.
+    ``band``: (lowest (N+1,), highest (N+1,), label) of the winding, shaded (e.g. over an uncertainty set)."""
     t = plan.time_s
     joint = plan.model.joints[0]
     params = plan.model.params[joint]
@@ -23,6 +24,8 @@ def plot_lift(plan, path) -> None:
     ax[2].axhline(params.motor.bus_voltage_v, ls=":", c="r", label="bus voltage")
     ax[2].axhline(-params.motor.bus_voltage_v, ls=":", c="r")
     ax[2].set_ylabel("voltage [V]")
+    if band is not None:
+        ax[3].fill_between(t, band[0], band[1], color="tab:red", alpha=0.25, label=band[2])
     ax[3].plot(t, plan.series("winding_c"), c="tab:red", label="winding")
     ax[3].plot(t, plan.sensor_c(), c="tab:orange", label="casing (sensor)")
     ax[3].axhline(plan.settings.limit_c, ls="--", c="k", label=f"winding limit {plan.settings.limit_c:g} °C")

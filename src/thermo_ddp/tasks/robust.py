@@ -166,8 +166,11 @@ class RobustLiftPlan(LiftPlan):
         return "\n".join(lines)
 
     def plot(self, path) -> None:
-        from .robust_plots import plot_robust_lift
-        plot_robust_lift(self, path)
+        """The lift's figure with the band of winding temperatures over the set (the replayed motors)."""
+        from .plots import plot_lift
+        r = self.robust
+        plot_lift(self, path, band=(r.band_c[:, 0], r.band_c[:, 1], f"winding over the set ({r.uset.label}, "
+                                                                     f"{BAND_SAMPLES} random motors and the worst)"))
 
 
 @dataclasses.dataclass
