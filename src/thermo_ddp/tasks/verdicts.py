@@ -56,3 +56,65 @@ def solve_work(results) -> dict[str, int]:
     work.update({k: sum(int(r.info[k]) for r in results) for k in PASS_COUNTS if all(k in r.info for r in results)})
     return work
 
+
+
+# --------------------------------------------------------------------------------------------
+# What a solve says: a verdict (or none), and the constraints that decide it by cause
+# --------------------------------------------------------------------------------------------
+# The cause classes of the plan JSON's "cause" (contract, third round): constraint kinds by class; a joint's
+# constraints carry its name after the kind (``winding_limit_arm_left_4_joint``). The task's own bands
+# (``hold_band``, ``return_band``) define the task: they are what the others prevent, never a cause.
+CAUSES = {"thermal": ("winding_limit", "terminal_winding_limit"),
+          "actuator": ("bus_voltage", "current_peak", "joint_velocity"),
+          "motion": ("stop_approach", "one_way", "terminal_rest", "acceleration_limit"),
+          "range": ("joint_range",)}
+CAUSE_WORDS = {"thermal": "the winding limit decides", "actuator": "the motor's current or voltage decides",
+               "motion": "the careful-motion bounds decide", "range": "the joint range decides"}
+
+
+def verdict(result: SolverResult, tol: float = FEASIBLE_TOL) -> str | None:
+    """``"feasible"`` (converged within ``tol``), ``"infeasible"`` (the solver's certificate) or None: the
+    solve reached no verdict (failed, or converged with a violation above ``tol``), so it says nothing
+    about the robot."""
+    if result.status == "converged" and result.max_constraint_violation <= tol:
+        return "feasible"
+    return "infeasible" if result.status == "infeasible" else None
+
+
+def cause_class(name: str) -> str | None:
+    """The cause class of a constraint name (None: a task band)."""
+    for cause, kinds in CAUSES.items():
+        if any(name == k or name.startswith(k + "_") for k in kinds):
+            return cause
+    return None
+
+
+def multiplier_sums(tp: TaskProblem, result: SolverResult) -> dict[str, float]:
+    """Sum over the plan of each named constraint's multipliers (0 where the solver gives none)."""
+    pr, m, out = tp.problem, result.multipliers, {}
+    for key, items, axis in (("constraints", pr.constraints, 0), ("terminal_constraints", pr.terminal_constraints, None)):
+        lam = np.asarray(m.get(key, []), float)
+        labels = [c.name for c in items for _ in range(c.size)]
+        if lam.size == 0 or lam.shape[-1] != len(labels):
+            continue
+        sums = np.abs(lam).sum(axis=axis) if axis is not None else np.abs(lam)
+        for value, label in zip(sums, labels):
+            out[label] = out.get(label, 0.0) + float(value)
+    return out
+
+
+def deciding_constraints(tp: TaskProblem, result: SolverResult, violated: bool) -> list[str]:
+    """The constraints that decide a verdict, most decisive first: those violated (``violated``: an
+    infeasible verdict) or binding (a feasible plan at its boundary), task bands left out, ranked by their
+    multipliers, then by how far past the bound they are."""
+    maxima = constraint_maxima(tp, result)
+    lams = multiplier_sums(tp, result)
+    limit = ACTIVE_TOL if violated else -ACTIVE_TOL
+    names = [k for k, v in maxima.items() if v >= limit and cause_class(k) is not None]
+    return sorted(names, key=lambda k: (-lams.get(k, 0.0), -maxima[k]))
+
+
+def cause_of(names) -> str | None:
+    """The cause class of the most decisive constraint of ``names`` (None when there is none)."""
+    classes = [cause_class(k) for k in names]
+    return next((c for c in classes if c is not None), None)
