@@ -198,7 +198,7 @@ class RecedingHorizonController:
                 iterations += best.iterations
         events = ("hold_shortened",) if status == "hold_shortened" else ()
         if not self._acceptable(result, False):
-            log.warning("no feasible initial plan (%s); applying the best iterate", result.status)
+            log.warning("no feasible initial plan (%s); applying the best iterate", result.reason or result.status)
             status, events = "fallback", events + ("no_feasible_plan",)
         self.plan, self.plan_age, self.k = result, 0, 0
         return ControlStep(current_a=self._clip(result.us[0]), status=status, solver_status=result.status,
@@ -236,7 +236,7 @@ class RecedingHorizonController:
             if derated:
                 events.append("derate")
             log.warning("t = %.1f s: re-solve %s (%s, violation %.2e, %.1f ms); previous plan's control with "
-                        "feedback%s", t, "too late" if late else "failed", result.status,
+                        "feedback%s", t, "too late" if late else "failed", result.reason or result.status,
                         result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
                         ", derated to the no-heating current" if derated else "")
         return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
