@@ -21,7 +21,6 @@ import numpy as np
 from ..solvers import SolverResult, WarmStart
 from .attempts import Outcome
 from .thermal_hold import thermal_trajectory, winding_indices
-from .verdicts import cause_of, deciding_constraints
 
 log = logging.getLogger(__name__)
 GUIDED_PROBES = 5   # probes placed by the prediction (galloping when it misses twice); bisection after them
@@ -120,8 +119,9 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
         step = 2 * step if outcome.verdict == last else 1   # the same side again: gallop
         last = outcome.verdict
-        guess = predicted_hold_knots(lp, (probe, outcome.result))
-        guess = max(guess, lo + step) if outcome.feasible else min(guess, hi - step)
-        if not outcome.feasible and cause_of(deciding_constraints(probe, outcome.result, violated=True)) != "thermal":
-            guess = 0  # not the heat: a shorter hold will not help, so try touching the goal at once
+        predicted = predicted_hold_knots(lp, (probe, outcome.result))
+        if not outcome.feasible and predicted >= knots:
+            guess = 0  # the heat allows this hold, so a shorter one will not help: try touching the goal at once
+        else:
+            guess = max(predicted, lo + step) if outcome.feasible else min(predicted, hi - step)
     return HoldSearch(lo, probes)

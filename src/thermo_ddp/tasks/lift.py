@@ -40,7 +40,7 @@ from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from .attempts import Outcome, SolverLadder
 from .constraints import joint_limit_constraints, stop_approach
-from .hold_search import longest_feasible_hold, predicted_peak_winding_c
+from .hold_search import longest_feasible_hold, predicted_hold_knots, predicted_peak_winding_c
 from .lift_plan import LiftPlan, LimitComparison, joule_energy_j, stop_approach_time_s  # noqa: F401 (public here)
 from .limits import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_in_joint_range,
                      check_knots, check_limit_c, joint_limit_c, joint_range_rad, limit_pair_c, winding_limits_c)
@@ -397,8 +397,10 @@ def _plan(lp: LiftProblem, best: LiftProblem, outcome: Outcome, knots: int, resu
 def _cause(lp: LiftProblem, best: LiftProblem, outcome: Outcome) -> tuple[str | None, str]:
     """The cause class of a verdict short of the request and the number a user can change."""
     names = deciding_constraints(best, outcome.result, violated=not outcome.feasible)
-    cause = cause_of(names)
-    s = lp.settings
+    s, held = lp.settings, best.hold_knots[1] - best.hold_knots[0]
+    # the heat decides a hold cut short; a lift that fails outright only when the replayed heat exceeds the limit
+    heat = outcome.feasible or predicted_hold_knots(lp, (best, outcome.result)) < held
+    cause = cause_of(names, heat)
     if cause == "thermal":
         need = predicted_peak_winding_c(lp, (best, outcome.result), lp.hold_knots[1] - lp.hold_knots[0])
         return cause, f"the {s.hold_s:g} s hold needs limit_c >= {math.ceil(need * 10) / 10:.1f} °C"

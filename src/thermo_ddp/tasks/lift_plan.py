@@ -113,11 +113,10 @@ class LimitComparison:
     def table(self) -> str:
         p0 = self.plans[0].settings
         head = (f"{p0.payload_kg:g} kg at the gripper, requested hold {p0.hold_s:g} s\n"
-                f"{'limit °C':>9} {'answer':>16} {'hold s':>7} {'winding °C':>11} {'casing °C':>10} "
+                f"{'limit °C':>9} {'holds all':>9} {'hold s':>7} {'winding °C':>11} {'casing °C':>10} "
                 f"{'Joule kJ':>9} {'solve s':>8}  binding")
-        words = {"feasible": "holds all", "infeasible_hold": "holds part", "infeasible": "cannot lift",
-                 "failed": "no answer"}
-        lines = [f"{r['limit_c']:9.0f} {words[r['status']]:>16} {r['hold_s']:7.1f} {r['peak_winding_c']:11.1f} "
+        words = {"feasible": "yes", "infeasible_hold": "part", "infeasible": "no", "failed": "unknown"}
+        lines = [f"{r['limit_c']:9.0f} {words[r['status']]:>9} {r['hold_s']:7.1f} {r['peak_winding_c']:11.1f} "
                  f"{r['peak_casing_c']:10.1f} {r['joule_energy_j'] / 1e3:9.2f} {r['solve_s']:8.2f}  {r['binding']}"
                  for r in self.rows()]
         return "\n".join([head, *lines, *(f"  {p.headline()}" for p in self.plans)])

@@ -111,10 +111,17 @@ def deciding_constraints(tp: TaskProblem, result: SolverResult, violated: bool) 
     lams = multiplier_sums(tp, result)
     limit = ACTIVE_TOL if violated else -ACTIVE_TOL
     names = [k for k, v in maxima.items() if v >= limit and cause_class(k) is not None]
+    if violated and result.certificate:  # the solver's own evidence, when it names the constraints
+        names = [k for k in names if k in result.certificate["constraints"]] or names
     return sorted(names, key=lambda k: (-lams.get(k, 0.0), -maxima[k]))
 
 
-def cause_of(names) -> str | None:
-    """The cause class of the most decisive constraint of ``names`` (None when there is none)."""
+def cause_of(names, heat_decides: bool | None = None) -> str | None:
+    """The cause class of ``names`` (most decisive first; None when there is none). A thermal constraint among
+    them decides unless ``heat_decides`` is False (e.g. a thermal replay shows the heat alone fits): a winding
+    over its limit is never the side effect of a motion bound, while a sagging hold is the side effect of the
+    heat (the multipliers of the violated constraints of an infeasible iterate do not tell the two apart)."""
     classes = [cause_class(k) for k in names]
-    return next((c for c in classes if c is not None), None)
+    if "thermal" in classes and heat_decides is not False:
+        return "thermal"
+    return next((c for c in classes if c not in (None, "thermal")), None)
