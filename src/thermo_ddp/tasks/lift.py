@@ -2,7 +2,7 @@
 
 The lift is a problem built on the general OCP layer (the solvers know nothing of it):
 - state x = [q, v, T_nodes] of the elbow, control u = winding current, per-knot parameter
-  p = [q_ref, tracking weight, hold flag, ambient_c, direction];
+  p = [q_ref, sqrt(tracking weight), hold flag, ambient_c, direction, the request's numbers];
 - costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
   (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
@@ -54,10 +54,12 @@ log = logging.getLogger(__name__)
 # and its weight, 1 on the hold's knots, the room; ``direction``: the sign the velocity may take (the lift's,
 # the lowering's), 0 while holding; then every number of the request (payload, limit, angles, weights, motion
 # bounds), constant over the knots. Only the model's structure, the time step and the integrator are compiled.
+# The cost weights enter as their square roots (``sqrt_<weight>``), the factor of a least-squares residual: so
+# every derivative, also with respect to the parameters (IPOPT's), is finite at a zero weight (issue 23).
 _REQUEST = ("payload_kg", "limit_c", "goal_rad", "start_rad", "hold_tolerance_rad", "velocity_limit_rad_s",
-            "energy_weight", "velocity_weight", "acceleration_weight", "acceleration_limit_rad_s2", "stop_speed_rad_s",
-            "stop_slope_per_s", "one_way_tolerance_rad_s")
-LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
+            "sqrt_energy_weight", "sqrt_velocity_weight", "sqrt_acceleration_weight", "acceleration_limit_rad_s2",
+            "stop_speed_rad_s", "stop_slope_per_s", "one_way_tolerance_rad_s")
+LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("sqrt_tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
                                   ("direction", 1), *((name, 1) for name in _REQUEST)))
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
@@ -199,10 +201,11 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     direction = np.zeros(q_ref.size)
     direction[:first] = np.sign(g - s0)               # lifting: toward the goal only
     direction[first + hold + 1:] = np.sign(s0 - g)    # lowering and resting: toward the start only
-    request = {name: getattr(settings, name) for name in _REQUEST}
+    request = {name: math.sqrt(getattr(settings, name[5:])) if name.startswith("sqrt_") else getattr(settings, name)
+               for name in _REQUEST}
     if request["acceleration_limit_rad_s2"] is None:
         request["acceleration_limit_rad_s2"] = 0.0  # no bound: no function reads it
-    p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
+    p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, sqrt_tracking_weight=math.sqrt(settings.tracking_weight),
                                hold_flag=flag, ambient_c=ambient_c, direction=direction, **request)
     return p, (first, first + hold)
 
@@ -233,13 +236,13 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 
     joule = motor.resistance_ohm(m, winding) * settings.dt_s
     costs = (
-        Cost("tracking", 1.0, stage("tracking", ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"]))),
-        # sqrt(w) outside sqrt(R dt): d/dT sqrt(w R dt) = w R' dt / (2 sqrt(w R dt)) is 0/0 at w = 0 (issue 23)
-        Cost("joule_energy", 1.0, stage("joule_energy", ca.sqrt(par["energy_weight"]) * ca.sqrt(joule) * u[0])),
-        Cost("velocity", 1.0, stage("velocity", ca.sqrt(par["velocity_weight"]) * v)),
+        Cost("tracking", 1.0, stage("tracking", par["sqrt_tracking_weight"] * (q - par["q_ref_rad"]))),
+        # sqrt(w) apart from sqrt(R dt): d/dT sqrt(w R dt) = w R' dt / (2 sqrt(w R dt)) is 0/0 at w = 0 (issue 23)
+        Cost("joule_energy", 1.0, stage("joule_energy", par["sqrt_energy_weight"] * ca.sqrt(joule) * u[0])),
+        Cost("velocity", 1.0, stage("velocity", par["sqrt_velocity_weight"] * v)),
     )
     terminal_costs = (
-        Cost("terminal_tracking", 1.0, terminal("terminal_tracking", ca.sqrt(par["tracking_weight"]) * (q - start))),
+        Cost("terminal_tracking", 1.0, terminal("terminal_tracking", par["sqrt_tracking_weight"] * (q - start))),
         Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
     limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"])
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
@@ -253,8 +256,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     if settings.careful_motion:
         still = par["one_way_tolerance_rad_s"]
         acceleration = model.runtime_payload_functions[0](x, u, env)[model.index(joint, "v_rad_s")]
-        costs += (Cost("acceleration", 1.0, stage("acceleration", ca.sqrt(par["acceleration_weight"] * settings.dt_s)
-                                                   * acceleration)),)
+        costs += (Cost("acceleration", 1.0, stage("acceleration", par["sqrt_acceleration_weight"]
+                                                   * math.sqrt(settings.dt_s) * acceleration)),)
         constraints += (
             Constraint("stop_approach", stage("stop_approach", stop_approach(
                 model, joint, x, par["stop_speed_rad_s"], par["stop_slope_per_s"]), "g")),
