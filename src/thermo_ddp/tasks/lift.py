@@ -55,7 +55,8 @@ log = logging.getLogger(__name__)
 # the lowering's), 0 while holding; then every number of the request (payload, limit, angles, weights, motion
 # bounds), constant over the knots. Only the model's structure, the time step and the integrator are compiled.
 # The cost weights enter as their square roots (``sqrt_<weight>``), the factor of a least-squares residual: so
-# every derivative, also with respect to the parameters (IPOPT's), is finite at a zero weight (issue 23).
+# every derivative, also with respect to the parameters (IPOPT's), is finite at a zero weight (issue 23; the
+# Joule residual sqrt(w) sqrt(R dt) i, as sqrt(w R dt) i, had 0/0 in d/dT at w = 0).
 _REQUEST = ("payload_kg", "limit_c", "goal_rad", "start_rad", "hold_tolerance_rad", "velocity_limit_rad_s",
             "sqrt_energy_weight", "sqrt_velocity_weight", "sqrt_acceleration_weight", "acceleration_limit_rad_s2",
             "stop_speed_rad_s", "stop_slope_per_s", "one_way_tolerance_rad_s")
@@ -237,7 +238,6 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     joule = motor.resistance_ohm(m, winding) * settings.dt_s
     costs = (
         Cost("tracking", 1.0, stage("tracking", par["sqrt_tracking_weight"] * (q - par["q_ref_rad"]))),
-        # sqrt(w) apart from sqrt(R dt): d/dT sqrt(w R dt) = w R' dt / (2 sqrt(w R dt)) is 0/0 at w = 0 (issue 23)
         Cost("joule_energy", 1.0, stage("joule_energy", par["sqrt_energy_weight"] * ca.sqrt(joule) * u[0])),
         Cost("velocity", 1.0, stage("velocity", par["sqrt_velocity_weight"] * v)),
     )
