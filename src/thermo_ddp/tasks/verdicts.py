@@ -105,14 +105,16 @@ def multiplier_sums(tp: TaskProblem, result: SolverResult) -> dict[str, float]:
 
 def deciding_constraints(tp: TaskProblem, result: SolverResult, violated: bool) -> list[str]:
     """The constraints that decide a verdict, most decisive first: those violated (``violated``: an
-    infeasible verdict) or binding (a feasible plan at its boundary), task bands left out, ranked by their
-    multipliers, then by how far past the bound they are."""
+    infeasible verdict; those the certificate names) or, when only task bands give way or the plan is
+    feasible, those at their bound; task bands left out, ranked by their multipliers, then by how far past
+    the bound they are."""
     maxima = constraint_maxima(tp, result)
     lams = multiplier_sums(tp, result)
-    limit = ACTIVE_TOL if violated else -ACTIVE_TOL
-    names = [k for k, v in maxima.items() if v >= limit and cause_class(k) is not None]
+    names = [k for k, v in maxima.items() if v > ACTIVE_TOL and cause_class(k) is not None] if violated else []
     if violated and result.certificate:  # the solver's own evidence, when it names the constraints
         names = [k for k in names if k in result.certificate["constraints"]] or names
+    if not names:  # only the task's bands give way (or a feasible plan): what holds them back is at its bound
+        names = [k for k, v in maxima.items() if v >= -ACTIVE_TOL and cause_class(k) is not None]
     return sorted(names, key=lambda k: (-lams.get(k, 0.0), -maxima[k]))
 
 
