@@ -1,10 +1,10 @@
 """The longest feasible hold of a lift in few complete solves.
 
 Each probe is a complete optimisation with a verdict (:mod:`thermo_ddp.tasks.attempts`). Where to probe
-comes from a thermal-only prediction (milliseconds): the longest hold whose winding stays under the limit
-when the currents of the lift, the hold and the lowering are replayed with the hold stretched or cut. Before
-any solve the currents are those that hold the reference still (gravity only); after one, the nearest
-solved plan's own currents (what the optimiser does on the lift, the hold band and the lowering). The
+comes first from the caller (``plan_lift``: the time to the limit holding at the goal from the start's
+temperatures, a little long), then from a thermal-only prediction (milliseconds): the longest hold whose
+winding stays under the limit when the last plan's currents of the lift, the hold and the lowering are
+replayed with the hold stretched or cut (what the optimiser does on the lift, the hold band and the lowering). The
 prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
 does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
 on the same side twice the probes gallop (steps doubling); bisection takes over after
@@ -64,32 +64,27 @@ def _peak_winding(lp, current: np.ndarray, speed: np.ndarray) -> float:
     return float(temps[:, winding_indices(lp.model)].max())
 
 
-def predicted_peak_winding_c(lp, plan: tuple[object, SolverResult] | None, knots: int) -> float:
-    """The winding's peak replaying ``plan``'s currents (None: the reference's) with a hold of ``knots``."""
+def predicted_peak_winding_c(lp, plan: tuple[object, SolverResult], knots: int) -> float:
+    """The winding's peak replaying ``plan``'s currents (its problem and result) with a hold of ``knots``."""
     current, speed, first, hold, held = _replay(lp, plan)
     return _peak_winding(lp, _stretched(current, first, hold, knots, held),
                          _stretched(speed, first, hold, knots, np.zeros_like(held)))
 
 
 def _replay(lp, plan):
-    """(current, speed, hold start, hold knots, held current) of ``plan`` or, for None, of the reference. The
-    held current is the least that holds the payload still inside the hold band (the optimiser's hold)."""
+    """(current, speed, hold start, hold knots, held current) of ``plan``. The held current is the least that
+    holds the payload still inside the hold band (the optimiser's hold)."""
     s = lp.settings
     held = min((lp.model.static_current_a([q]) for q in (s.goal_rad - s.hold_tolerance_rad,
                                                          s.goal_rad + s.hold_tolerance_rad)), key=lambda i: abs(i[0]))
-    if plan is None:
-        ref = lp.with_hold(0)
-        q = ref.params[:, ref.problem.parameters.slice("q_ref_rad")]
-        return lp.model.static_current_a(q[:-1]), np.gradient(q, lp.time_s, axis=0)[:-1], ref.hold_knots[0], 0, held
     src, result = plan
     speed = result.xs[:-1, [lp.model.index(j, "v_rad_s") for j in lp.model.joints]]
     return result.us, speed, src.hold_knots[0], src.hold_knots[1] - src.hold_knots[0], held
 
 
-def predicted_hold_knots(lp, plan: tuple[object, SolverResult] | None = None) -> int:
+def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     """The longest hold (knots, up to the requested one; -1: none) whose replayed currents keep the winding
-    under ``lp.settings.limit_c``: the currents of ``plan`` (its problem and result) or, without one, those
-    holding the reference still."""
+    under ``lp.settings.limit_c``: the currents of ``plan`` (its problem and result)."""
     lo, hi = -1, lp.hold_knots[1] - lp.hold_knots[0] + 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
