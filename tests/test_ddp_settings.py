@@ -58,7 +58,7 @@ def test_wrong_shapes_raise():
 
 def test_failure_is_reported_without_nan():
     res = DDPSolver(PROBLEM, {"backend": "casadi", "max_iterations": 0}).solve([1.0, 0.0])
-    assert not res.success and res.status == "max_iterations"
+    assert not res.success and res.status == "failed" and res.reason == "max_iterations"
     assert np.all(np.isfinite(res.xs)) and np.isfinite(res.cost)
     assert "max_iterations" in res.report(print_out=False)
 
@@ -69,7 +69,7 @@ def test_non_finite_model_is_a_status_not_nan():
         ca.Function("f", [y, v], [ca.vertcat(y[0], ca.log(y[1] - 5.0))], ["x", "u"], ["x_next"]), 5,
         [Cost("all", 1.0, ca.Function("r", [y, v], [ca.vertcat(y, v)], ["x", "u"], ["r"]))])
     res = DDPSolver(bad, {"backend": "casadi"}).solve([1.0, 0.0])
-    assert not res.success and res.status == "numerical_error"
+    assert not res.success and res.status == "failed" and res.reason == "numerical_error"
     assert np.all(np.isfinite(res.xs)) and not np.isnan(res.cost)
     assert not np.isnan(res.max_constraint_violation)
 

@@ -12,7 +12,8 @@ class FaultySolver:
     """Wraps a solver; solve number ``n`` (0-based, in call order) is made to fail when ``n`` is in
     ``fail_calls`` or with ``failure_probability``, and to take ``late_s`` (its result unchanged, its
     reported time ``late_s``: a deadline miss) when in ``late_calls`` or with ``late_probability``.
-    A failed solve returns the warm start with infinite cost and violation, status ``injected_failure``."""
+    A failed solve returns the warm start with infinite cost and violation, status ``failed``, reason
+    ``injected_failure``."""
 
     def __init__(self, solver, fail_calls=(), late_calls=(), failure_probability: float = 0.0,
                  late_probability: float = 0.0, late_s: float = 1.0, seed: int = 0):
@@ -42,6 +43,6 @@ class FaultySolver:
             xs, us = np.array(warm.xs, float), np.array(warm.us, float)
         else:
             xs, us = np.tile(np.asarray(x0, float), (pr.horizon + 1, 1)), np.zeros((pr.horizon, pr.nu))
-        return SolverResult(solver="injected", success=False, status="injected_failure",
+        return SolverResult(solver="injected", success=False, status="failed", reason="injected_failure",
                             message="failure injected by FaultySolver", xs=xs, us=us, cost=float("inf"),
                             max_constraint_violation=float("inf"), iterations=0, solve_s=0.0)

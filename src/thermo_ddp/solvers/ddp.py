@@ -62,7 +62,8 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
 from ._backends import Layout, make_backend
-from .result import HISTORY_KEYS, SolverResult, WarmStart, constraint_violation
+from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
+from .result import HISTORY_KEYS, STATUSES, SolverResult, WarmStart, constraint_violation
 
 log = logging.getLogger(__name__)
 
@@ -170,6 +171,7 @@ class DDPSolver:
         self._ng, self._ngN = problem.n_constraints, problem.n_terminal_constraints  # sizes, computed once
         start = time.perf_counter()
         self.backend = make_backend(problem, settings, self.layout)
+        self.kkt, self._rows = KKTEvaluator(problem), constraint_rows(problem)
         self.build_s = time.perf_counter() - start
         log.info("DDP built for %s (nx=%d nu=%d N=%d) in %.2f s: backend %s, %s, multiple shooting (gaps), "
                  "box-QP by projected Newton, PHR augmented Lagrangian for %d+%d inequalities, Armijo backtracking "
@@ -233,7 +235,7 @@ class DDPSolver:
         evaluation, first = be.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass, fused
         it_ = _Iterate(X, U, *evaluation)
         if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
-            return self._result(it_, lam, lamN, rho, None, "numerical_error",
+            return self._result(it_, P, lam, lamN, rho, None, "numerical_error",
                                 "the model gives non-finite values at the initial guess", 0, start,
                                 {k: [] for k in HISTORY_KEYS})
         reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
@@ -316,8 +318,8 @@ class DDPSolver:
         lamN_out = np.maximum(0.0, lamN + rho * it_.GN)
         if costates is None and values is not None:
             costates = self.layout.costates(values)
-        return self._result(it_, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
-                            hist, counts)
+        return self._result(it_, P, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
+                            hist, counts, al_log)
 
     def _increase(self, reg: float, policy=None) -> float:
         """reg x reg_factor; after a failed backward pass (``policy``) at least reg - 2 p, with p the
@@ -382,8 +384,10 @@ class DDPSolver:
                            ("reg", reg), ("alpha", alpha), ("penalty", rho)):
             hist[key].append(float(value))
 
-    def _result(self, it_, lam, lamN, rho, pol, status, message, iterations, start, hist,
-                counts: Mapping[str, int] | None = None) -> SolverResult:
+    def _result(self, it_, P, lam, lamN, rho, pol, status, message, iterations, start, hist,
+                counts: Mapping[str, int] | None = None, al_log=()) -> SolverResult:
+        """The result of the contract: ``status`` is "converged", "infeasible" (with its certificate from the
+        multiplier updates' (penalty, violation) log) or a failure reason (status "failed")."""
         pr = self.problem
         solve_s = time.perf_counter() - start
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
@@ -396,12 +400,24 @@ class DDPSolver:
         if not finite and status != "numerical_error":
             status, message = "numerical_error", "non-finite iterate"
         viol = viol if np.isfinite(viol) else float("inf")
-        success = status == "converged"
-        log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", status, iterations, it_.J,
-                 viol, 1e3 * solve_s)
-        return SolverResult(solver=f"ddp[{self.backend.name}]", success=success, status=status, message=message,
+        reason, certificate = ("", None) if status == "converged" else (status, None)
+        if status == "infeasible":
+            reason, certificate = "locally_infeasible", self._certificate(it_, al_log)
+        kkt = self.kkt.residuals(it_.X, it_.U, P, lam, lamN, it_.X[0]) if finite else dict.fromkeys(KKT_KEYS, float("inf"))
+        log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", reason or status, iterations, it_.J, viol, 1e3 * solve_s)
+        return SolverResult(solver=f"ddp[{self.backend.name}]", success=status == "converged",
+                            status=status if status in STATUSES else "failed", reason=reason, message=message,
+                            certificate=certificate, kkt=kkt,
                             xs=it_.X.copy(), us=it_.U.copy(), cost=float(it_.J) if finite else float("inf"),
                             max_constraint_violation=viol,
                             iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
                             info={"backend": self.backend.name, **(counts or dict.fromkeys(PASS_COUNTS, 0)),
                                   "full_second_order": self.settings.full_second_order})
+
+    def _certificate(self, it_, al_log) -> dict:
+        """Penalties and violations at the multiplier updates, and the constraints violated at the end."""
+        tol = self.settings.constraint_tolerance
+        names = [n for rows, G in zip(self._rows, (it_.G, it_.GN)) if G.size
+                 for n, v in zip(rows, np.max(np.atleast_2d(G), axis=0)) if v > tol]
+        return {"penalty": [float(r) for r, _ in al_log], "violation": [float(v) for _, v in al_log],
+                "constraints": list(dict.fromkeys(names))}

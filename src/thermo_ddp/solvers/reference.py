@@ -18,6 +18,7 @@ import numpy as np
 from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
+from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
 from .result import SolverResult, WarmStart
 
 log = logging.getLogger(__name__)
@@ -66,6 +67,7 @@ class _NlpSolver:
             settings = ReferenceSettings.from_mapping(settings)
         self.problem, self.settings = problem, settings
         self.tr = problem.transcription
+        self.kkt, self._rows = KKTEvaluator(problem), constraint_rows(problem)
         self._solvers: dict[bool, ca.Function] = {}
         self._solver(False)
 
@@ -100,17 +102,18 @@ class _NlpSolver:
         start = time.perf_counter()
         sol = solver(**args)
         solve_s = time.perf_counter() - start
-        return self._result(solver, sol, solve_s, xs, us)
+        return self._result(solver, sol, solve_s, xs, us, x0, params)
 
-    def _result(self, solver, sol, solve_s, xs0, us0) -> SolverResult:
+    def _result(self, solver, sol, solve_s, xs0, us0, x0, params) -> SolverResult:
         tr = self.tr
         stats = solver.stats()
         w, g = np.asarray(sol["x"]).ravel(), np.asarray(sol["g"]).ravel()
-        status = str(stats.get("return_status", "unknown"))
-        success = bool(stats.get("success", False))
+        plugin_status = str(stats.get("return_status", "unknown"))
+        status, reason = plugin_verdict(plugin_status, bool(stats.get("success", False)))
         cost = float(sol["f"])
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(g)) and np.isfinite(cost)):
-            success, status, w = False, f"numerical_error ({status})", tr.pack(xs0, us0)
+        finite = bool(np.all(np.isfinite(w)) and np.all(np.isfinite(g)) and np.isfinite(cost))
+        if not finite:
+            status, reason, w = "failed", "numerical_error", tr.pack(xs0, us0)
             g, cost = np.full_like(g, np.inf), float("inf")
         xs, us = tr.unpack(w)
         viol = max(float(np.max(np.abs(g[tr.equality]), initial=0.0)),
@@ -118,12 +121,53 @@ class _NlpSolver:
                    float(np.max(tr.lbx - w, initial=0.0)), float(np.max(w - tr.ubx, initial=0.0)))
         mult = tr.split_constraint_multipliers(sol["lam_g"])
         mult.update(nlp_lam_g=np.asarray(sol["lam_g"]).ravel(), nlp_lam_x=np.asarray(sol["lam_x"]).ravel())
+        kkt = self._kkt(xs, us, x0, params, mult) if finite else dict.fromkeys(KKT_KEYS, float("inf"))
+        certificate = None
+        if status == "infeasible":  # the restoration phase converged to a local minimum of the violation
+            certificate = {"penalty": [], "violation": [viol], "constraints": self._violated(g),
+                           "method": f"{self.plugin} restoration phase: a local minimum of the constraint violation"}
         iterations = int(stats.get("iter_count", -1))
-        log.info("%s %s after %d iterations: cost %.8g, %.3f ms", self.plugin, status, iterations, cost, 1e3 * solve_s)
-        return SolverResult(solver=self.plugin, success=success, status="converged" if success else status,
-                            message=status, xs=xs, us=us, cost=cost, max_constraint_violation=viol,
-                            iterations=iterations, solve_s=solve_s, multipliers=mult,
-                            info={"plugin_status": status, "t_wall_total": stats.get("t_wall_total")})
+        log.info("%s %s after %d iterations: cost %.8g, %.3f ms", self.plugin, plugin_status, iterations, cost,
+                 1e3 * solve_s)
+        return SolverResult(solver=self.plugin, success=status == "converged", status=status, reason=reason,
+                            message=plugin_status, certificate=certificate, kkt=kkt, xs=xs, us=us, cost=cost,
+                            max_constraint_violation=viol, iterations=iterations, solve_s=solve_s, multipliers=mult,
+                            info={"plugin_status": plugin_status, "t_wall_total": stats.get("t_wall_total")})
+
+    def _violated(self, g) -> list[str]:
+        """Names of the constraints the transcription's g violates ("dynamics" for the gaps)."""
+        pr, tol = self.problem, self.settings.constraint_tolerance
+        nx, ng, N = pr.nx, pr.n_constraints, pr.horizon
+        stages = g[nx: nx + N * (nx + ng)].reshape(N, nx + ng)
+        worst = np.concatenate([np.max(stages[:, nx:], axis=0, initial=-np.inf), g[nx + N * (nx + ng):]])
+        names = [n for n, v in zip(self._rows[0] + self._rows[1], worst) if v > tol]
+        if np.max(np.abs(stages[:, :nx]), initial=0.0) > tol:
+            names.insert(0, "dynamics")
+        return list(dict.fromkeys(names))
+
+    def _kkt(self, xs, us, x0, params, mult) -> dict[str, float]:
+        """The KKT residuals with the plugin's duals: costates lam_{k+1} = -(multiplier of x_{k+1} - f_k)."""
+        costates = -np.vstack([mult["initial"], mult["dynamics"]])
+        _, z = self.tr.unpack(mult["nlp_lam_x"])
+        return self.kkt.residuals(xs, us, params, mult["constraints"], mult["terminal_constraints"], x0, costates, z)
+
+
+# The plugins' return statuses (IPOPT's ApplicationReturnStatus, also fatrop's where they coincide) -> reason
+_REASONS = {"Maximum_Iterations_Exceeded": "max_iterations", "Maximum_CpuTime_Exceeded": "max_time",
+            "Maximum_WallTime_Exceeded": "max_time", "Restoration_Failed": "restoration_failed",
+            "Search_Direction_Becomes_Too_Small": "line_search_failed", "Error_In_Step_Computation": "numerical_error",
+            "Invalid_Number_Detected": "numerical_error", "Diverging_Iterates": "diverging_iterates",
+            "Not_Enough_Degrees_Of_Freedom": "too_few_degrees_of_freedom", "User_Requested_Stop": "stopped"}
+_INFEASIBLE = ("Infeasible_Problem_Detected",)  # IPOPT: restoration converged to a point of non-zero violation
+
+
+def plugin_verdict(plugin_status: str, success: bool) -> tuple[str, str]:
+    """(status, reason) of the contract from a plugin's return status and success flag."""
+    if success:
+        return "converged", ""
+    if plugin_status in _INFEASIBLE:
+        return "infeasible", "locally_infeasible"
+    return "failed", _REASONS.get(plugin_status, plugin_status.lower() or "unknown")
 
 
 class IpoptSolver(_NlpSolver):

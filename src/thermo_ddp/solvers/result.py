@@ -8,6 +8,9 @@ from typing import Any
 import numpy as np
 
 HISTORY_KEYS = ("cost", "merit", "violation", "gap", "stationarity", "step", "reg", "alpha", "penalty")
+# The solver result contract (issue 23): a verdict only when converged or certified infeasible.
+STATUSES = ("converged", "infeasible", "failed")
+CERTIFICATE_KEYS = ("penalty", "violation", "constraints")
 
 
 @dataclasses.dataclass
@@ -22,6 +25,14 @@ class SolverResult:
     (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts).
     ``history`` maps HISTORY_KEYS to one value per iteration (NaN where not defined).
     Trajectories are never NaN: a failed solve returns its last finite iterate and says so.
+
+    ``status`` is one of :data:`STATUSES` and ``success == (status == "converged")``. ``reason`` says why a
+    solve is not converged ("" when it is; e.g. "max_iterations", "regularisation_failed",
+    "line_search_failed", "numerical_error", "restoration_failed"). ``certificate`` (``"infeasible"`` only)
+    holds the evidence that the violation does not decrease as the penalty grows: ``{"penalty": [..],
+    "violation": [..], "constraints": [names of the violated constraints]}``. ``kkt`` holds the KKT residuals
+    ("stationarity", "primal", "complementarity") at the returned iterate, evaluated the same way for every
+    solver (:mod:`thermo_ddp.solvers.kkt`).
     """
 
     solver: str
@@ -39,19 +50,38 @@ class SolverResult:
     multipliers: dict[str, Any] = dataclasses.field(default_factory=dict)
     history: dict[str, list] = dataclasses.field(default_factory=dict)
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
+    reason: str = ""
+    certificate: dict[str, list] | None = None
+    kkt: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.status not in STATUSES or self.success != (self.status == "converged"):
+            raise ValueError(f"{self.solver}: status {self.status!r} with success {self.success}: expected one of "
+                             f"{STATUSES}, success exactly when converged")
+        if (self.status == "converged") == bool(self.reason):
+            raise ValueError(f"{self.solver}: reason {self.reason!r} with status {self.status!r}: a reason exactly "
+                             "when not converged")
+        if (self.status == "infeasible") != (self.certificate is not None) or \
+                (self.certificate is not None and not set(CERTIFICATE_KEYS) <= set(self.certificate)):
+            raise ValueError(f"{self.solver}: an infeasible verdict needs a certificate with {CERTIFICATE_KEYS}, "
+                             "and only it")
 
     def __getitem__(self, key):
         return getattr(self, key)
 
     def summary(self) -> dict:
-        """The plan JSON's "solver" entry: name, iterations, solve_s, cost, max_constraint_violation."""
-        return {"name": self.solver, "iterations": int(self.iterations), "solve_s": float(self.solve_s),
-                "cost": float(self.cost), "max_constraint_violation": float(self.max_constraint_violation)}
+        """The plan JSON's "solver" entry: name, status, reason, iterations, solve_s, cost,
+        max_constraint_violation and the KKT residuals."""
+        return {"name": self.solver, "status": self.status, "reason": self.reason, "iterations": int(self.iterations),
+                "solve_s": float(self.solve_s), "cost": float(self.cost),
+                "max_constraint_violation": float(self.max_constraint_violation),
+                "kkt": {k: float(v) for k, v in self.kkt.items()}}
 
     def report(self, print_out: bool = True) -> str:
         """Verbose table of the iterations and a summary; printed unless print_out is False."""
         out = io.StringIO()
-        out.write(f"{self.solver}: {self.status} ({'success' if self.success else 'FAILURE'}) - {self.message}\n")
+        reason = f", {self.reason}" if self.reason else ""
+        out.write(f"{self.solver}: {self.status}{reason} - {self.message}\n")
         keys = [k for k in HISTORY_KEYS if k in self.history]
         if keys:
             out.write(" iter " + "".join(f"{k:>13s}" for k in keys) + "\n")
@@ -59,6 +89,12 @@ class SolverResult:
                 out.write(f"{i:5d} " + "".join(f"{self.history[k][i]:13.5e}" for k in keys) + "\n")
         out.write(f"cost {self.cost:.10g}, max constraint violation {self.max_constraint_violation:.3e}, "
                   f"iterations {self.iterations}, solve {1e3 * self.solve_s:.3f} ms\n")
+        if self.kkt:
+            out.write("KKT residuals: " + ", ".join(f"{k} {v:.2e}" for k, v in self.kkt.items()) + "\n")
+        if self.certificate is not None:
+            c = self.certificate
+            out.write(f"certificate: violation {c['violation']} at penalty {c['penalty']} "
+                      f"({', '.join(c['constraints'])})\n")
         for key, value in self.info.items():
             out.write(f"{key}: {value}\n")
         text = out.getvalue()

@@ -6,9 +6,9 @@ import numpy as np
 from .._figures import new_figure
 
 
-def plot_lift(plan, path, band=None) -> None:
-    """Four panels: angle; current and voltage; winding and casing vs the limit and the cut-off.
-    ``band``: (lowest (N+1,), highest (N+1,), label) of the winding, shaded (e.g. over an uncertainty set)."""
+def plot_lift(plan, path=None):
+    """Four panels: angle; current; voltage; winding and casing vs the limit and the cut-off. Written to
+    ``path`` when given; the Figure is returned either way."""
     t = plan.time_s
     joint = plan.model.joints[0]
     params = plan.model.params[joint]
@@ -24,8 +24,6 @@ def plot_lift(plan, path, band=None) -> None:
     ax[2].axhline(params.motor.bus_voltage_v, ls=":", c="r", label="bus voltage")
     ax[2].axhline(-params.motor.bus_voltage_v, ls=":", c="r")
     ax[2].set_ylabel("voltage [V]")
-    if band is not None:
-        ax[3].fill_between(t, band[0], band[1], color="tab:red", alpha=0.25, label=band[2])
     ax[3].plot(t, plan.series("winding_c"), c="tab:red", label="winding")
     ax[3].plot(t, plan.sensor_c(), c="tab:orange", label="casing (sensor)")
     ax[3].axhline(plan.settings.limit_c, ls="--", c="k", label=f"winding limit {plan.settings.limit_c:g} °C")
@@ -35,6 +33,8 @@ def plot_lift(plan, path, band=None) -> None:
     for a in ax:
         a.legend(loc="best", fontsize=8)
         a.grid(alpha=0.3)
-    ax[0].set_title(f"{plan.settings.payload_kg:g} kg lift, limit {plan.settings.limit_c:g} °C: {plan.status}")
+    ax[0].set_title(plan.headline(), fontsize=10, wrap=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    if path is not None:
+        fig.savefig(path, dpi=100)
+    return fig

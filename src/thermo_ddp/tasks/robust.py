@@ -27,10 +27,13 @@ from .._memo import Memo
 from ..model.parameters import packaged_parameter_file
 from ..model.arm import ELBOW
 from ..multi_model import MultiModelProblem
-from .lift import (LIFT_PARAMETERS, LiftPlan, LiftProblem, LiftSettings, build_lift_problem, lift_terms,
-                   longest_feasible_hold, make_solver, plan_lift, time_to_limit_s)
-from .series import format_s
-from .verdicts import binding_constraints, solver_summary
+from ..model.actuated import ActuatedArm
+from .attempts import SolverLadder
+from .hold_search import longest_feasible_hold
+from .lift import (LIFT_PARAMETERS, LiftPlan, LiftProblem, LiftSettings, build_lift_problem, lift_terms, make_solver,
+                   plan_lift, time_to_limit_s)
+from .problem import initial_guess
+from .verdicts import binding_constraints, cause_of, deciding_constraints, solver_summary
 from .uncertainty import UncertaintySet, WorstCase, check_fraction, scenario_step
 
 log = logging.getLogger(__name__)
@@ -152,35 +155,41 @@ class RobustSummary:
 class RobustLiftPlan(LiftPlan):
     """A :class:`LiftPlan` safe for every motor of the set (its trajectories: the nominal motor's)."""
 
-    robust: RobustSummary
+    robust: RobustSummary = dataclasses.field(kw_only=True)
 
     def to_dict(self) -> dict:
         return {**super().to_dict(), "robust": self.robust.to_dict()}
 
-    def report(self) -> str:
+    def headline(self) -> str:
         r = self.robust
-        lines = super().report().split("\n")
-        lines.insert(2, f"  robust over {r.uset.label} ({r.uset.size} values): hold {self.achieved_hold_s:.1f} s "
-                        f"(nominal motor alone {r.nominal_hold_s:.1f} s), worst motor's winding {r.worst_winding_c:.1f} °C, "
-                        f"{r.thetas.shape[0]} scenario(s)")
-        return "\n".join(lines)
+        return (f"{super().headline()}; for every motor of {r.uset.label} (nominal motor alone "
+                f"{r.nominal_hold_s:.1f} s; worst motor's winding {r.worst_winding_c:.1f} °C; "
+                f"{r.thetas.shape[0]} scenario(s))")
 
-    def plot(self, path) -> None:
+    def plot(self, path=None):
         """The lift's figure with the band of winding temperatures over the set (the replayed motors)."""
         from .plots import plot_lift
         r = self.robust
-        plot_lift(self, path, band=(r.band_c[:, 0], r.band_c[:, 1], f"winding over the set ({r.uset.label}, "
-                                                                     f"{BAND_SAMPLES} random motors and the worst)"))
+        fig = plot_lift(self)
+        ax = fig.axes[3]
+        ax.fill_between(self.time_s, r.band_c[:, 0], r.band_c[:, 1], color="tab:red", alpha=0.25,
+                        label=f"winding over the set ({r.uset.label}: {BAND_SAMPLES} random motors and the worst)")
+        ax.legend(loc="best", fontsize=8)
+        if path is not None:
+            fig.savefig(path, dpi=100)
+        return fig
 
 
 @dataclasses.dataclass
 class _Round:
-    """The current plan of the robust search: its problem, result and hold (knots; -1: none feasible)."""
+    """The current plan of the robust search: its problem, result, hold (knots; -1: none feasible) and the
+    searches so far."""
 
     lp: LiftProblem
     result: Any
     knots: int
     searches: list
+    failed: bool = False
 
     @property
     def qv(self) -> np.ndarray:
@@ -188,13 +197,35 @@ class _Round:
         return xs[:, :2 * self.lp.model.nu]
 
 
-def _hold_estimate_s(rnd: _Round, winding: np.ndarray, limit_c: float) -> float:
+@dataclasses.dataclass(frozen=True)
+class _SearchView:
+    """What the longest-hold search sees of a robust lift: its holds are the robust problem's, its thermal
+    prediction that of the worst scenario (its motor and start), the one that binds."""
+
+    robust: RobustLiftProblem
+    model: ActuatedArm
+    x0: np.ndarray
+
+    def __getattr__(self, name):
+        return getattr(self.robust, name)
+
+    def with_hold(self, hold_s: float) -> RobustLiftProblem:
+        return self.robust.with_hold(hold_s)
+
+
+def _search_view(rlp: RobustLiftProblem, uset: UncertaintySet, theta, start_c) -> _SearchView:
+    model = rlp.model
+    params = {j: uset.parameters(model.params[j], theta) for j in model.joints}
+    worst_model = ActuatedArm.from_parameters(model.arm.settings, params)
+    return _SearchView(rlp, worst_model, np.concatenate([rlp.x0[:2 * model.nu], start_c]))
+
+
+def _hold_estimate_knots(rnd: _Round, winding: np.ndarray, limit_c: float) -> int:
     """Where the worst motor's winding first crosses the limit, counted from the hold's start: the next
-    search's first guess."""
+    search's first probe."""
     start = rnd.lp.hold_knots[0]
     over = np.flatnonzero(winding[start:] > limit_c)
-    held = over[0] if over.size else rnd.lp.hold_knots[1] - start
-    return max(0.0, (held - 1) * rnd.lp.settings.dt_s)
+    return int(max(0, (over[0] if over.size else rnd.lp.hold_knots[1] - start) - 1))
 
 
 def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
@@ -203,38 +234,44 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
     spec = Uncertainty.of(uncertainty)
     lp = build_lift_problem(settings)
     uset = spec.uncertainty_set(lp)
-    settings, limit = lp.settings, lp.settings.limit_c
-    model, n = lp.model, lp.model.nu
+    settings, limit, model = lp.settings, lp.settings.limit_c, lp.model
     step = scenario_step(model, uset.keys, settings.dt_s, settings.integrator, LIFT_PARAMETERS.size, _env_of)
-    start = lp.x0[2 * n:] if spec.start == "measured" else None
+    start = lp.x0[2 * model.nu:] if spec.start == "measured" else None
     worst = WorstCase(model, uset, step, model.index(model.joints[0], "winding_c"), start)
-    nominal = plan_lift(**dataclasses.asdict(settings))
+    nominal = plan_lift(settings=settings)
     idle_c, idle_theta = worst.hottest_idle_c(model.ambient_c)
     if idle_c >= limit:
         return _idle_too_hot(nominal, spec, uset, idle_c, idle_theta)
-    solvers, worst_s = {}, 0.0
     knots = -1 if nominal.status == "infeasible" else int(round(nominal.achieved_hold_s / settings.dt_s))
-    rnd = _Round(lp.with_hold(nominal.achieved_hold_s), _as_result(nominal), knots, [])
-    thetas, failure = [uset.nominal], ""
+    rnd = _Round(lp.with_hold(nominal.achieved_hold_s), _as_result(nominal), knots, [], nominal.status == "failed")
+    thetas, failure, worst_s = [uset.nominal], "", 0.0
     while True:
         tic = time.perf_counter()
         motor = worst.search(rnd.qv, rnd.result.us, _nominal_params(rnd.lp), model.ambient_c)
         worst_s += time.perf_counter() - tic
-        if motor.peak_c <= limit + TOLERANCE_K or rnd.knots < 0:
+        if motor.peak_c <= limit + TOLERANCE_K or rnd.knots < 0 or rnd.failed:
             break
         if len(thetas) > MAX_SCENARIOS or any(np.allclose(motor.theta, th) for th in thetas):
             failure = (f"the robust search did not settle: after {len(thetas)} scenarios a motor of the set still "
                        f"reaches {motor.peak_c:.1f} °C")
             break
         thetas.append(motor.theta)
-        w = worst.replay(motor.theta, rnd.qv, rnd.result.us, _nominal_params(rnd.lp), model.ambient_c)
-        rlp = robust_problem(lp, uset, thetas, worst)
-        solver = solvers.setdefault(len(thetas), make_solver(rlp))
-        search = longest_feasible_hold(rlp, solver, _hold_estimate_s(rnd, w, limit))
-        rnd = _Round(*search.best, search.knots, rnd.searches + [search])
+        rnd = _robust_round(lp, uset, thetas, worst, rnd, motor)
         log.info("%d scenarios: robust hold %.1f s (worst motor %.1f °C before)", len(thetas),
-                 max(search.knots, 0) * settings.dt_s, motor.peak_c)
+                 max(rnd.knots, 0) * settings.dt_s, motor.peak_c)
     return _plan(nominal, rnd, spec, uset, np.array(thetas), motor, worst, worst_s, failure)
+
+
+def _robust_round(lp, uset, thetas, worst: WorstCase, rnd: _Round, motor) -> _Round:
+    """The longest hold with the scenarios ``thetas`` (the last: the worst motor of the previous plan)."""
+    winding = worst.replay(motor.theta, rnd.qv, rnd.result.us, _nominal_params(rnd.lp), lp.model.ambient_c)
+    rlp = robust_problem(lp, uset, thetas, worst)
+    ladder = SolverLadder(rlp.problem, make_solver(rlp))
+    view = _search_view(rlp, uset, motor.theta, worst.initial_c(motor.theta, lp.model.ambient_c))
+    search = longest_feasible_hold(view, lambda probe, warm: ladder.solve(probe, warm or initial_guess(probe)),
+                                   _hold_estimate_knots(rnd, winding, lp.settings.limit_c))
+    best, outcome = search.best
+    return _Round(best, outcome.result, search.knots, rnd.searches + [search], search.failed is not None)
 
 
 def _nominal_params(lp: LiftProblem) -> np.ndarray:
@@ -254,63 +291,46 @@ def _band(worst: WorstCase, rnd: _Round, motor, seed: int = 0) -> np.ndarray:
     return np.column_stack([w.min(axis=0), w.max(axis=0)])
 
 
-def _status(rnd: _Round, nominal: LiftPlan, failure: str) -> tuple[str, str, float]:
-    s = rnd.lp.settings
-    top = s.knots()["hold"]
-    achieved = max(rnd.knots, 0) * s.dt_s
-    if failure:
-        return "failed", failure, achieved
-    if not rnd.searches:
-        return nominal.status, nominal.message + " (for every motor of the set)", nominal.achieved_hold_s
-    if rnd.knots == top:
-        return "feasible", f"holds {s.hold_s:.1f} s under {s.limit_c:g} °C for every motor of the set", s.hold_s
-    if rnd.knots < 0:
-        return "infeasible", f"no motor-safe lift under {s.limit_c:g} °C: some motor of the set overheats", 0.0
-    return "infeasible_hold", (f"a {s.hold_s:.1f} s hold is infeasible for some motor of the set; the longest hold "
-                               f"safe for every one is {achieved:.1f} s"), achieved
+def _status(rnd: _Round, failure: str) -> str:
+    if failure or rnd.failed:
+        return "failed"
+    top = rnd.lp.settings.knots()["hold"]
+    return "feasible" if rnd.knots == top else "infeasible" if rnd.knots < 0 else "infeasible_hold"
 
 
-def _plan(nominal, rnd, uncertainty, uset, thetas, motor, worst, worst_s, failure) -> RobustLiftPlan:
-    status, message, achieved = _status(rnd, nominal, failure)
-    if not rnd.searches:
-        return _robust(nominal, status, message, achieved, RobustSummary(
-            uncertainty, uset, thetas, nominal.achieved_hold_s, motor.peak_c, motor.theta, motor.certified,
-            _band(worst, rnd, motor), nominal.solver["total_solve_s"], worst_s))
-    lp, result = rnd.lp, rnd.result
+def _plan(nominal, rnd, spec, uset, thetas, motor, worst, worst_s, failure) -> RobustLiftPlan:
+    status = _status(rnd, failure)
+    robust = RobustSummary(spec, uset, thetas, nominal.achieved_hold_s, motor.peak_c, motor.theta, motor.certified,
+                           _band(worst, rnd, motor), nominal.solver["total_solve_s"], worst_s)
+    if not rnd.searches:  # the nominal plan is safe for the whole set (or failed, or cannot lift at all)
+        return _robust(nominal, nominal.status, nominal.achieved_hold_s, robust, failure)
+    lp, result, s = rnd.lp, rnd.result, rnd.lp.settings
     xs = lp.scenario(result.xs, 0)
-    every = [r for s in rnd.searches for _, r in s.probes.values()]
-    total = nominal.solver["total_solve_s"] + sum(s.solve_s for s in rnd.searches)
-    binding = tuple(binding_constraints(lp, result))
-    if status != "feasible" and binding:
-        message += f"; binding: {', '.join(binding)}"
-    ttl = time_to_limit_s(lp.model, xs[lp.hold_knots[0]], lp.settings.goal_rad, lp.settings.limit_c)
-    summary = solver_summary(result, total, len(every) + nominal.solver["solves"], every, name=lp.settings.solver)
-    robust = RobustSummary(uncertainty, uset, thetas, nominal.achieved_hold_s, motor.peak_c, motor.theta,
-                           motor.certified, _band(worst, rnd, motor), nominal.solver["total_solve_s"], worst_s)
-    return RobustLiftPlan(status == "feasible", status, message, lp.settings, float(achieved), lp.time_s, xs,
-                          result.us, lp.model, summary, binding, ttl, robust)
+    every = [r for search in rnd.searches for r in search.results]
+    total = nominal.solver["total_solve_s"] + sum(search.solve_s for search in rnd.searches)
+    cause = None if status in ("feasible", "failed") else cause_of(deciding_constraints(lp, result, status == "infeasible"))
+    achieved = s.hold_s if status == "feasible" else max(rnd.knots, 0) * s.dt_s
+    plan = RobustLiftPlan(
+        status == "feasible", status, failure, s, float(achieved), lp.time_s, xs, result.us, lp.model,
+        solver_summary(result, total, len(every) + nominal.solver["solves"], every, name=s.solver),
+        tuple(binding_constraints(lp, result)), time_to_limit_s(lp.model, xs[lp.hold_knots[0]], s.goal_rad, s.limit_c),
+        cause, robust=robust)
+    return dataclasses.replace(plan, message=failure or plan.headline())
 
 
-def _robust(plan: LiftPlan, status, message, achieved, robust: RobustSummary) -> RobustLiftPlan:
+def _robust(plan: LiftPlan, status, achieved, robust: RobustSummary, message: str = "") -> RobustLiftPlan:
     fields = {f.name: getattr(plan, f.name) for f in dataclasses.fields(LiftPlan)}
-    return RobustLiftPlan(**(fields | {"status": status, "message": message, "feasible": status == "feasible",
-                                       "achieved_hold_s": float(achieved)}), robust=robust)
+    out = RobustLiftPlan(**(fields | {"status": status, "feasible": status == "feasible",
+                                      "achieved_hold_s": float(achieved)}), robust=robust)
+    return dataclasses.replace(out, message=message or out.headline())
 
 
-def _idle_too_hot(nominal: LiftPlan, uncertainty, uset, idle_c: float, theta) -> RobustLiftPlan:
+def _idle_too_hot(nominal: LiftPlan, spec, uset, idle_c: float, theta) -> RobustLiftPlan:
     """The set holds a motor that already exceeds the limit at rest: no plan can be safe for it."""
     limit = nominal.settings.limit_c
     message = (f"infeasible for the set {uset.label}: its hottest motor already sits at {idle_c:.1f} °C at rest, "
                f"not below the {limit:g} °C limit (narrow the set or raise the limit)")
     band = np.column_stack([nominal.series("winding_c")[:, 0]] * 2)
-    return _robust(nominal, "infeasible", message, 0.0, RobustSummary(
-        uncertainty, uset, uset.nominal[None], nominal.achieved_hold_s, idle_c, np.asarray(theta), True, band,
-        nominal.solver["total_solve_s"], 0.0))
-
-
-def report_line(plan: LiftPlan) -> str:
-    """One line for a comparison table: the robust and nominal holds and the worst winding."""
-    r = plan.robust
-    return (f"robust {plan.achieved_hold_s:.1f} s / nominal {r.nominal_hold_s:.1f} s, worst {r.worst_winding_c:.1f} °C, "
-            f"{r.thetas.shape[0]} scen.; time to limit {format_s(plan.time_to_limit_s)}")
-
+    return _robust(nominal, "infeasible", 0.0, RobustSummary(
+        spec, uset, uset.nominal[None], nominal.achieved_hold_s, idle_c, np.asarray(theta), True, band,
+        nominal.solver["total_solve_s"], 0.0), message)

@@ -16,12 +16,13 @@ def format_s(t: float) -> str:
 
 class PlanSeries:
     """Trajectories by name and the plan JSON of a plan with ``model``, ``time_s``, ``xs`` (N+1, nx),
-    ``us`` (N, nu), ``feasible``, ``status``, ``message``, ``solver``, ``binding_constraints`` and
+    ``us`` (N, nu), ``feasible``, ``status``, ``cause``, ``message``, ``solver``, ``binding_constraints`` and
     ``time_to_limit_s``."""
 
     @property
     def success(self) -> bool:
-        return self.feasible
+        """The planner reached a verdict (feasible or not): every status but ``failed``."""
+        return self.status != "failed"
 
     def series(self, quantity: str) -> np.ndarray:
         """(N+1, joints) of a state quantity (q_rad, v_rad_s, winding_c, casing_c, drive_c)."""
@@ -49,7 +50,8 @@ class PlanSeries:
         """The plan JSON (contract): arrays [time][joint], ``casing_c`` the sensor node, ``drive_c`` only
         when every joint has a drive node; the ``model`` echo, ``solver``, binding constraints and the
         time to the limit (None: never)."""
-        d = {"feasible": self.feasible, "status": self.status, "message": self.message, "payload_kg": payload_kg,
+        d = {"success": self.success, "feasible": self.feasible, "status": self.status, "cause": self.cause,
+             "message": self.message, "payload_kg": payload_kg,
              "limit_c": limit_c, "hold_s": hold_s, "achieved_hold_s": achieved_hold_s,
              "joints": list(self.model.joints), "time_s": self.time_s.tolist(), "q_rad": self.series("q_rad").tolist(),
              "v_rad_s": self.series("v_rad_s").tolist(), "current_a": self.currents().tolist(),

@@ -14,7 +14,7 @@ from ..model.integrators import rk4
 from ..model.thermal import ThermalNetwork, joint_heat_rhs
 
 _THERMAL_IN = ["temperatures_c", "current_a", "velocity_rad_s", "ambient_c"]
-_HOLD_SIMULATIONS = Memo()  # (structure_key, dt_s, steps) -> the mapped thermal step of hold_temperatures
+_TRAJECTORIES = Memo()  # (structure_key, dt_s, steps) -> the mapped thermal step of thermal_trajectory
 
 
 def joint_thermal_rhs(network: ThermalNetwork, motor_params) -> ca.Function:
@@ -52,11 +52,20 @@ def hold_temperatures(model: ActuatedArm, current_a, temperatures_c, duration_s:
                       dt_s: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """Thermal-only simulation of holding still with constant ``current_a``: (time_s, temperatures)."""
     steps = max(1, int(math.ceil(duration_s / dt_s)))
-    f = _HOLD_SIMULATIONS.get((model.structure_key, dt_s, steps),
-                              lambda: thermal_step_function(thermal_rhs_function(model), dt_s).mapaccum(steps))
-    temps = np.array(f(np.asarray(temperatures_c, float), np.asarray(current_a, float), np.zeros(model.nu),
-                       model.ambient_c)).T
-    return np.arange(steps + 1) * dt_s, np.vstack([np.asarray(temperatures_c, float), temps])
+    current = np.tile(np.asarray(current_a, float).ravel(), (steps, 1))
+    temps = thermal_trajectory(model, current, np.zeros_like(current), temperatures_c, dt_s)
+    return np.arange(steps + 1) * dt_s, temps
+
+
+def thermal_trajectory(model: ActuatedArm, current_a, velocity_rad_s, temperatures_c, dt_s: float) -> np.ndarray:
+    """Thermal-only simulation with per-step ``current_a`` and ``velocity_rad_s`` (K, joints), each held over
+    a step of ``dt_s`` (RK4): the temperatures (K+1, nodes), the first row ``temperatures_c``."""
+    current, speed = (np.atleast_2d(np.asarray(a, float)) for a in (current_a, velocity_rad_s))
+    steps = current.shape[0]
+    f = _TRAJECTORIES.get((model.structure_key, dt_s, steps),
+                          lambda: thermal_step_function(thermal_rhs_function(model), dt_s).mapaccum(steps))
+    temps = np.array(f(np.asarray(temperatures_c, float), current.T, speed.T, model.ambient_c)).T
+    return np.vstack([np.asarray(temperatures_c, float), temps])
 
 
 def first_crossing(time_s: np.ndarray, values: np.ndarray, level: float) -> float:

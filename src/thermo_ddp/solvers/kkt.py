@@ -1,0 +1,104 @@
+"""First-order optimality (KKT) residuals of a solve, evaluated once for every solver.
+
+On the problem's per-knot functions, with the Lagrangian of the multiple-shooting problem written with
+costates lam_k (the value gradients of DDP; IPOPT's dynamics multipliers of x_{k+1} - f_k with the
+opposite sign), inequality multipliers mu_k >= 0 (g <= 0) and control-bound multipliers z_k:
+
+    stage    L_k = 0.5 |r(x_k, u_k)|^2 + mu_k' g(x_k, u_k) + lam_{k+1}' f(x_k, u_k)
+    terminal L_N = 0.5 |r_N(x_N)|^2 + mu_N' g_N(x_N)
+
+- stationarity: max over knots of |dL_k/dx_k - lam_k| (k >= 1; x_0 is fixed) and |dL_k/du_k + z_k|;
+- primal: the largest of |x_0 - x0|, the dynamics gaps |f_k - x_{k+1}|, inequality max(g, 0) and control-bound violation;
+- complementarity: the largest |mu g| and |z (u - bound)|, and any wrong-signed multiplier |min(mu, 0)|.
+
+A solver that has no costates (or no bound multipliers) of its own leaves them out: the costates are then
+the exact adjoint of its trajectory and multipliers (lam_N = dL_N/dx_N, lam_k = dL_k/dx_k, so the x rows
+vanish: the reduced gradient, as DDP's convergence test measures it), and the bound multipliers the
+projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhere).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+KKT_KEYS = ("stationarity", "primal", "complementarity")
+BOUND_TOL = 1e-9  # a control this close to its bound is at it (for the projected bound multipliers)
+
+
+def constraint_rows(problem) -> tuple[list[str], list[str]]:
+    """The constraint name of every row of the stage g and of the terminal g_N."""
+    return ([c.name for c in problem.constraints for _ in range(c.size)],
+            [c.name for c in problem.terminal_constraints for _ in range(c.size)])
+
+
+class KKTEvaluator:
+    """The residuals of :data:`KKT_KEYS` at an iterate; built once per problem structure (any horizon)."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        F = problem.functions
+        sym = F.symbolic
+        x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
+        mu, lam_next = sym.sym("mu", problem.n_constraints), sym.sym("lam_next", problem.nx)
+        xn, muN = sym.sym("x_next", problem.nx), sym.sym("muN", problem.n_terminal_constraints)
+        f, g = F.step(x, u, p), F.stage_constraint(x, u, p)
+        L = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(mu, g) + ca.dot(lam_next, f)
+        Lx, Lu = ca.gradient(L, x), ca.gradient(L, u)
+        self._stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
+        # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input)
+        self._adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu], [Lx])
+        gN = F.terminal_constraint(x, p)
+        LN = 0.5 * ca.sumsqr(F.terminal_residual(x, p)) + ca.dot(muN, gN)
+        self._terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
+        self._maps: dict[int, tuple[ca.Function, ca.Function]] = {}
+
+    def _mapped(self, N: int):
+        if N not in self._maps:
+            self._maps[N] = (self._stage.map(N), self._adjoint.mapaccum(N))
+        return self._maps[N]
+
+    def costates(self, xs, us, params, mu, muN) -> np.ndarray:
+        """The exact adjoint (N+1, nx) of the trajectory with inequality multipliers mu (N, ng), muN (ngN)."""
+        N = len(us)
+        _, adjoint = self._mapped(N)
+        lamN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
+        rev = slice(None, None, -1)
+        acc = np.asarray(adjoint(lamN, xs[:N][rev].T, us[rev].T, params[:N][rev].T, np.asarray(mu)[rev].T))
+        return np.vstack([acc.T[rev], lamN])
+
+    def residuals(self, xs, us, params, mu, muN, x0, costates=None, bound_multipliers=None) -> dict[str, float]:
+        """The KKT residuals at the trajectory from ``x0``; ``costates`` (N+1, nx) and ``bound_multipliers``
+        (N, nu) when the solver has them."""
+        pr = self.problem
+        xs, us, params = (np.asarray(a, dtype=float) for a in (xs, us, params))
+        mu = np.asarray(mu, dtype=float).reshape(len(us), pr.n_constraints)
+        muN = np.asarray(muN, dtype=float).ravel()
+        if costates is None:
+            costates = self.costates(xs, us, params, mu, muN)
+        stage, _ = self._mapped(len(us))
+        Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
+                                                        xs[1:].T))
+        LxN, GN = (np.asarray(v).ravel() for v in self._terminal(xs[-1], params[-1], muN))
+        lb, ub = np.broadcast_to(pr.u_lb, us.shape), np.broadcast_to(pr.u_ub, us.shape)
+        z = _projected_bound_multipliers(Lu, us, lb, ub) if bound_multipliers is None else bound_multipliers
+        stat = [np.abs(Lu + z), np.abs(Lx[1:] - costates[1:-1]), np.abs(LxN - costates[-1])]
+        primal = [np.abs(xs[0] - x0), np.abs(C), np.maximum(G, 0.0), np.maximum(GN, 0.0), us - ub, lb - us]
+        z_lo, z_up = np.minimum(z, 0.0), np.maximum(z, 0.0)
+        comp = [np.abs(mu * G), np.abs(muN * GN), np.maximum(-mu, 0.0), np.maximum(-muN, 0.0),
+                np.abs(z_lo * np.where(np.isfinite(lb), us - lb, 0.0)),
+                np.abs(z_up * np.where(np.isfinite(ub), ub - us, 0.0))]
+        return {"stationarity": _largest(stat), "primal": _largest(primal), "complementarity": _largest(comp)}
+
+
+def _projected_bound_multipliers(Lu, us, lb, ub):
+    """z = -dL/du where a control at its bound is pushed outwards (z <= 0 at the lower bound, >= 0 at the
+    upper), zero elsewhere: the bound multipliers that make those rows stationary."""
+    at_lo = (us <= lb + BOUND_TOL) & (Lu > 0)
+    at_hi = (us >= ub - BOUND_TOL) & (Lu < 0)
+    return np.where(at_lo | at_hi, -Lu, 0.0)
+
+
+def _largest(parts) -> float:
+    values = [float(np.max(p)) for p in parts if np.size(p)]
+    value = max(values, default=0.0)
+    return value if np.isfinite(value) else float("inf")
