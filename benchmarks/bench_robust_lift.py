@@ -15,7 +15,9 @@ For the default 40 kg lift under 84 °C and 140 °C with every thermal value wit
 4. the start convention: the robust hold when every motor starts at its own rest (``start="rest"``) instead
    of the measured initial temperatures (the default).
 
-    python benchmarks/bench_robust_lift.py [--repeats 3] [--quick]   (--quick: DDP only, one repeat)
+    python benchmarks/bench_robust_lift.py [--repeats 3] [--quick]
+
+(--quick: DDP only, one repeat, written to robust_lift_ddp.json)
 """
 from __future__ import annotations
 
@@ -107,7 +109,8 @@ def main() -> None:
     solvers = ("ddp",) if args.quick else ("ddp", "ipopt")
     repeats = 1 if args.quick else args.repeats
     results = {f"{limit:g}c": bench_limit(limit, repeats, solvers) for limit in LIMITS_C}
-    write("robust_lift", {"fraction": FRACTION, "payload_kg": 40.0, "repeats": repeats, "results": results})
+    write("robust_lift_ddp" if args.quick else "robust_lift",
+          {"fraction": FRACTION, "payload_kg": 40.0, "repeats": repeats, "results": results})
 
 
 if __name__ == "__main__":
