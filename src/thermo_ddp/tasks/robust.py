@@ -142,6 +142,7 @@ class RobustSummary:
     band_c: np.ndarray        # (N+1, 2): the lowest and highest winding over the replayed motors
     nominal_solve_s: float
     worst_case_s: float
+    verdict: str = ""         # why no plan can be safe for the set, when the set itself says so
 
     def to_dict(self) -> dict:
         return {"uncertainty": self.uncertainty.value, "start": self.uncertainty.start, "scenarios": int(self.thetas.shape[0]),
@@ -162,6 +163,8 @@ class RobustLiftPlan(LiftPlan):
 
     def headline(self) -> str:
         r = self.robust
+        if r.verdict:
+            return f"{self.settings.payload_kg:g} kg: {r.verdict}"
         return (f"{super().headline()}; for every motor of {r.uset.label} (nominal motor alone "
                 f"{r.nominal_hold_s:.1f} s; worst motor's winding {r.worst_winding_c:.1f} °C; "
                 f"{r.thetas.shape[0]} scenario(s))")
@@ -328,9 +331,9 @@ def _robust(plan: LiftPlan, status, achieved, robust: RobustSummary, message: st
 def _idle_too_hot(nominal: LiftPlan, spec, uset, idle_c: float, theta) -> RobustLiftPlan:
     """The set holds a motor that already exceeds the limit at rest: no plan can be safe for it."""
     limit = nominal.settings.limit_c
-    message = (f"infeasible for the set {uset.label}: its hottest motor already sits at {idle_c:.1f} °C at rest, "
+    verdict = (f"infeasible for the set {uset.label}: its hottest motor already sits at {idle_c:.1f} °C at rest, "
                f"not below the {limit:g} °C limit (narrow the set or raise the limit)")
     band = np.column_stack([nominal.series("winding_c")[:, 0]] * 2)
     return _robust(nominal, "infeasible", 0.0, RobustSummary(
         spec, uset, uset.nominal[None], nominal.achieved_hold_s, idle_c, np.asarray(theta), True, band,
-        nominal.solver["total_solve_s"], 0.0), message)
+        nominal.solver["total_solve_s"], 0.0, verdict))
