@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem
-from thermo_ddp.tasks._common import solve_work
+from thermo_ddp.tasks.verdicts import solve_work
 from thermo_ddp.solvers import SolverResult, WarmStart
 
 # The lift scenario at every N: 40 kg at the gripper, lift 2 s, hold 15.6 s, lower 2 s, rest 0.4 s

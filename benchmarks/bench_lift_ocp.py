@@ -5,8 +5,7 @@
    140 °C limit (inactive: the plan peaks near 95 °C) and a 94 °C limit (active during the hold).
    Each solver cold (from lift.initial_guess, as plan_lift starts) and warm: from its own solution
    of the neighbouring problem, the same lift with the hold one knot shorter (the previous probe
-   of plan_lift's longest-hold search); DDP takes that solution's trajectories (lift.neighbour_warm_start,
-   as the search does), IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
+   of plan_lift's longest-hold search); DDP takes that solution's trajectories (as the search does), IPOPT its primal and dual solution (warm_start_init_point), fatrop the primal only.
    Reported: median wall time of ``solve`` (and the solver's own clock), iterations, final cost,
    max violation, status, cost difference to IPOPT's cold optimum; DDP's time ratio N=800 / N=100.
 2. plan_lift: whole cold calls (problem and solver built inside; DDP's compiled code comes from
@@ -18,7 +17,7 @@
 
 Every problem is the lift's default transcription (``LiftSettings``: careful motion on).
 
-    python benchmarks/bench_lift_ocp.py [--repeats 5] [--quick]
+    python benchmarks/bench_lift_ocp.py [--repeats 5] [--quick] [--plans-only]
 """
 from __future__ import annotations
 
@@ -29,9 +28,10 @@ import time
 
 from _common import write
 from _ocp_bench import SCENARIO, SCENARIO_S, lift_problem, nlp_warm_start, row, timed_solves
-from thermo_ddp.tasks._common import DEFAULT_HOLD_S, MotionQuality
-from thermo_ddp.tasks.lift import (LiftSettings, binding_constraints, initial_guess, make_solver,
-                                   neighbour_warm_start, plan_lift)
+from thermo_ddp.tasks.limits import DEFAULT_HOLD_S
+from thermo_ddp.tasks.motion import MotionQuality
+from thermo_ddp.solvers import WarmStart
+from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, initial_guess, make_solver, plan_lift
 
 KNOTS = (100, 200, 400, 800)
 LIMITS_C = {"limit_inactive_140c": 140.0, "limit_active_94c": 94.0}
@@ -52,7 +52,7 @@ def bench_knots(knots: int, limit_c: float, repeats: int) -> dict:
         cold, t_cold = timed_solves(lambda: solver.solve(lp.x0, lp.params, initial_guess(lp)), repeats)
         reference = cold if name == "ipopt" else reference
         previous = solver.solve(neighbour.x0, neighbour.params, initial_guess(neighbour))
-        warm_start = neighbour_warm_start(previous) if name == "ddp" else nlp_warm_start(previous)
+        warm_start = WarmStart(previous.xs, previous.us) if name == "ddp" else nlp_warm_start(previous)
         solver.solve(lp.x0, lp.params, warm_start)  # untimed: IPOPT builds its dual-warm-start instance here
         warm, t_warm = timed_solves(lambda: solver.solve(lp.x0, lp.params, warm_start), repeats)
         out[name] = {"build_s": build_s, "cold": row(cold, t_cold), "warm": row(warm, t_warm),
@@ -83,6 +83,7 @@ def bench_plan(payload_kg: float, limit_c: float, hold_s: float, repeats: int) -
         m: MotionQuality = plan.motion
         out[label] = {"wall_median_s": statistics.median(walls), "wall_min_s": min(walls), "repeats": repeats,
                       "solve_s": plan.solver["total_solve_s"], "solves": plan.solver["solves"],
+                      "probes": plan.solver["probes"],
                       "status": plan.status, "achieved_hold_s": plan.achieved_hold_s, "work": plan.solver["work"],
                       "iterations_last": plan.solver["iterations"], "cost": plan.solver["cost"],
                       "max_violation": plan.solver["max_constraint_violation"],
@@ -100,10 +101,10 @@ def bench_plan(payload_kg: float, limit_c: float, hold_s: float, repeats: int) -
     return out
 
 
-def run(repeats: int, quick: bool) -> dict:
+def run(repeats: int, quick: bool, plans_only: bool = False) -> dict:
     knots = KNOTS
     cases = {}
-    for label, limit_c in LIMITS_C.items():
+    for label, limit_c in ({} if plans_only else LIMITS_C).items():
         print(f"lift OCP, {label}", flush=True)
         cases[label] = {str(n): bench_knots(n, limit_c, repeats) for n in knots}
         for kind in ("cold", "warm"):
@@ -124,9 +125,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--quick", action="store_true", help="2 repeats, one plan_lift call per case")
+    parser.add_argument("--plans-only", action="store_true",
+                        help="only part 2 (whole plan_lift calls), written to results/lift_ocp_plans.json")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    write("lift_ocp", run(2 if args.quick else args.repeats, args.quick))
+    result = run(2 if args.quick else args.repeats, args.quick, args.plans_only)
+    write("lift_ocp_plans" if args.plans_only else "lift_ocp", result)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ import pytest
 from thermo_ddp.solvers import DDPSettings, DDPSolver
 from thermo_ddp.solvers import _pass_cache
 from thermo_ddp.testing.thermal_pendulum import thermal_pendulum, x0_of
-from thermo_ddp.tasks._common import initial_guess
+from thermo_ddp.tasks.problem import initial_guess
 from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem
 
 RHO = 100.0

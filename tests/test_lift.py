@@ -10,7 +10,7 @@ from thermo_ddp.errors import InputError
 from thermo_ddp.tasks.lift import (LIFT_PARAMETERS, LiftSettings, binding_constraints, build_lift_problem, plan_lift,
                                    solve)
 
-PLAN_KEYS = {"feasible", "status", "message", "payload_kg", "limit_c", "hold_s", "achieved_hold_s", "joints",
+PLAN_KEYS = {"success", "feasible", "status", "cause", "remedy", "message", "payload_kg", "limit_c", "hold_s", "achieved_hold_s", "joints",
              "time_s", "q_rad", "v_rad_s", "current_a", "voltage_v", "winding_c", "casing_c", "drive_c", "model",
              "solver"}
 MODEL_KEYS = {"motors", "robot", "locked_joints", "gravity_m_s2", "payload", "integrator", "dt_s"}
@@ -63,7 +63,10 @@ def test_infeasible_hold_gives_the_longest_feasible_hold_found_by_the_optimiser(
     plan = plan_lift(40.0, 84.0, 20.0)
     assert not plan.feasible and plan.status == "infeasible_hold"
     assert 5.0 < plan.achieved_hold_s < 20.0
-    assert "winding_limit" in plan.binding_constraints and "longest feasible hold" in plan.message
+    assert "winding_limit" in plan.binding_constraints and plan.cause == "thermal"
+    assert plan.message.startswith(f"40 kg: holds {plan.achieved_hold_s:.1f} s of the 20 s asked under 84 °C; "
+                                   "the winding limit decides")
+    assert plan.solver["solves"] <= 5  # placed by the thermal replay, not bisected (issue 23)
     assert plan.series("winding_c").max() == pytest.approx(84.0, abs=0.05)
     # the verdict is the optimiser's: one knot more is infeasible for the same solver
     lp = build_lift_problem(LiftSettings(hold_s=20.0, limit_c=84.0))
@@ -90,7 +93,7 @@ def test_cli_plan_writes_json_and_four_panel_plot(tmp_path, capsys):
     d = json.loads(out.read_text())
     assert d["feasible"] and d["payload_kg"] == 20.0 and d["solver"]["name"] == "ddp"
     assert fig.stat().st_size > 20_000
-    assert "FEASIBLE" in capsys.readouterr().out
+    assert "20 kg: holds the 5 s asked under 84 °C" in capsys.readouterr().out
 
 
 def test_cli_plan_careful_motion_is_on_unless_turned_off(tmp_path):
@@ -133,13 +136,13 @@ def test_cli_compare_prints_one_row_per_limit(capsys):
     rows = [line.split() for line in capsys.readouterr().out.splitlines() if line.strip()[:3] in ("84 ", "140")]
     assert [r[0] for r in rows] == ["84", "140"]
     holds = {r[0]: float(r[2]) for r in rows}
-    assert holds["84"] < 15.0 <= holds["140"] and rows[1][1] == "True"
+    assert holds["84"] < 15.0 <= holds["140"] and rows[1][1] == "yes"
 
 
 def test_default_limit_and_hold_have_one_home(tmp_path, elbow_file):
     """No limit given: the elbow file's cut-off (another file, another limit); the hold: DEFAULT_HOLD_S."""
     from thermo_ddp.model.parameters import load_parameters, save_parameters
-    from thermo_ddp.tasks._common import DEFAULT_HOLD_S, limit_pair_c
+    from thermo_ddp.tasks.limits import DEFAULT_HOLD_S, limit_pair_c
 
     params = load_parameters(elbow_file)
     assert build_lift_problem(LiftSettings(hold_s=1.0)).settings.limit_c == params.limits.safety_cutoff_c == 84.0
@@ -168,7 +171,8 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     """Issue 15's must-show, measured on the motion the planned currents produce on the model (simulated here):
     up, hold, down (one reversal), at most 0.3 rad/s within 0.1 rad of a joint stop, at rest at the end, inside
     the range; the plan's own MotionQuality says the same."""
-    from thermo_ddp.tasks._common import MotionQuality, joint_range_rad
+    from thermo_ddp.tasks.limits import joint_range_rad
+    from thermo_ddp.tasks.motion import MotionQuality
 
     plan = default_plan
     assert plan.settings.careful_motion and plan.status == "infeasible_hold" and plan.achieved_hold_s > 5.0
@@ -229,7 +233,7 @@ def test_acceleration_limit_bounds_the_motion_and_ddp_finds_ipopts_optimum():
 
 
 def test_motion_quality_counts_reversals_and_speed_near_the_stops():
-    from thermo_ddp.tasks._common import MotionQuality
+    from thermo_ddp.tasks.motion import MotionQuality
 
     t = np.linspace(0.0, 2.0, 201)
     q = -0.05 - 0.5 * np.sin(np.pi * t / 2) ** 2       # up and back down: one reversal
@@ -276,7 +280,7 @@ def test_time_to_limit_is_the_whole_model_held_still():
     """The lift's time to limit (thermal-only RK4 hold) against the whole model held at the goal by its
     static current, integrated by implicit Euler at a 10x finer step (mechanics included)."""
     from thermo_ddp.model.actuated import load_model
-    from thermo_ddp.tasks._common import first_crossing
+    from thermo_ddp.tasks.thermal_hold import first_crossing
     from thermo_ddp.tasks.lift import time_to_limit_s
     model = load_model(payload_kg=40.0)
     goal = -np.pi / 2

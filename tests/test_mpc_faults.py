@@ -176,7 +176,8 @@ def test_careful_motion_planner_keeps_planning_a_hotter_plant():
     direction or near the stop does not make re-solves infeasible at knot 0 (16 of 165 periods fell back with
     them on x_0). The true winding stays under the limit; the executed approach to the stop is slow, the arm at
     rest at the end."""
-    from thermo_ddp.tasks._common import MotionQuality, joint_range_rad
+    from thermo_ddp.tasks.limits import joint_range_rad
+    from thermo_ddp.tasks.motion import MotionQuality
 
     r = run(careful_motion=True)
     lp = planning_problem(r.settings, build_models(r.settings)[0])

@@ -10,7 +10,7 @@ from .model.actuated import ActuatedArm, Trajectory, load_model
 from .model.arm import LEFT_ARM, ArmSettings, build_arm
 from .errors import InputError
 from .monitor import ArmMonitor, monitor_bag, monitor_recordings
-from .tasks._common import DEFAULT_HOLD_S
+from .tasks.limits import DEFAULT_HOLD_S
 from .tasks.lift import LiftPlan, LiftSettings, compare_limits, plan_lift
 from .tasks.whole_arm import WholeArmPlan, WholeArmSettings, plan_whole_arm
 from .mpc import MPCSettings, run_closed_loop

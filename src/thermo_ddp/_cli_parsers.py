@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from .tasks._common import DEFAULT_HOLD_S
+from .tasks.limits import DEFAULT_HOLD_S
 
 JSON_STDOUT = "-"  # --json -: the JSON on stdout (the report then goes to stderr)
 VERBOSE, QUIET = ("-v", "--verbose"), ("-q", "--quiet")
@@ -100,11 +100,21 @@ def demo_parser() -> Parser:
     return demo
 
 
+def _fraction_or_file(text: str):
+    """``--uncertainty``'s value: a number (checked by the planner: 0 < FRACTION < 1), or ``file`` (what
+    the option alone means: the model file's [uncertainty])."""
+    return text if text == "file" else number("(a fraction)")(text)
+
+
 def plan_parser(name: str, description: str) -> Parser:
     cmd = Parser(prog=f"thermo-ddp {name}", description=description)
     _payload_and_hold(cmd, "requested hold at the goal")
     cmd.add_argument("--solver", choices=("ddp", "ipopt", "fatrop"), default="ddp",
                      help="solver of the transcribed problem (default %(default)s)")
+    cmd.add_argument("--uncertainty", nargs="?", const="file", default=None, type=_fraction_or_file,
+                     metavar="FRACTION", help="plan for every motor of a set: each thermal capacity and resistance, "
+                     "the winding resistance and the drive's losses within +-FRACTION (0 < FRACTION < 1); without "
+                     "a number, the model file's [uncertainty] intervals (default: none, the file's values only)")
     if name == "plan":
         cmd.add_argument("--limit-c", type=number("°C"), default=None,
                          help="winding limit in °C (default: the model file's [limits] safety_cutoff_c, 84 °C for "

@@ -58,7 +58,7 @@ def _plan(args, out: Outputs) -> Run:
     options = {"solver": args.solver, "careful_motion": args.careful_motion}
     if args.model:
         options["parameter_file"] = args.model
-    plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, **options)
+    plan = plan_lift(args.payload_kg, args.limit_c, args.hold_s, uncertainty=args.uncertainty, **options)
     out.figure("--plot", plan.plot)
     return Run(plan.report(), plan.to_dict())
 
@@ -67,7 +67,8 @@ def _compare(args, out: Outputs) -> Run:
     from ._figures import plot_comparison
     from .tasks.lift import compare_limits
     limits = tuple(args.limits_c) if args.limits_c else None
-    comparison = compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver)
+    comparison = compare_limits(args.payload_kg, limits, args.hold_s, solver=args.solver,
+                                uncertainty=args.uncertainty)
     out.figure("--plot", lambda path: plot_comparison(comparison.plans, path))
     data = {"success": all(p.status != "failed" for p in comparison.plans), "payload_kg": args.payload_kg,
             "hold_s": args.hold_s, "rows": [r | {"status": p.status, "message": p.message}

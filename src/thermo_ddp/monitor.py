@@ -21,7 +21,9 @@ from .model.integrators import rk4
 from .model.parameters import JointParameters, load_parameters, packaged_parameter_file
 from .model.thermal import ThermalNetwork, network_from_parameters
 from .recordings import Recording, TopicMap, read_bag_joints
-from .tasks._common import default_limit_c, finite_or_none, first_crossing, format_s, joint_thermal_rhs
+from .tasks.limits import default_limit_c
+from .tasks.series import finite_or_none, format_s
+from .tasks.thermal_hold import first_crossing, joint_thermal_rhs
 
 
 @dataclasses.dataclass(frozen=True)

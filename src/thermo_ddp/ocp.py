@@ -20,6 +20,7 @@ import dataclasses
 import functools
 import hashlib
 import logging
+import re
 from typing import Sequence
 
 import casadi as ca
@@ -173,10 +174,14 @@ def _symbolic_call(fun: ca.Function, out_name: str, where: str):
     return inputs, ca.densify(fun.call(inputs)[_output_index(fun, out_name, where)])
 
 
+_TERM_NAME = re.compile(r"[A-Za-z_]\w*(\[\w+\])?")
+
+
 def _check_term(kind: str, name, field: str, fun, out_name: str) -> int:
-    """A cost's or constraint's name and CasADi function; returns the index of its output."""
-    if not isinstance(name, str) or not name.isidentifier():
-        raise InputError(kind, "name", name, "expected an identifier-like string")
+    """A cost's or constraint's name and CasADi function; returns the index of its output. A name is
+    identifier-like, with an optional tag in brackets (``winding_limit[s3]``: one scenario's copy)."""
+    if not isinstance(name, str) or not _TERM_NAME.fullmatch(name):
+        raise InputError(kind, "name", name, "expected an identifier-like string (optionally tagged: name[tag])")
     if not isinstance(fun, ca.Function):
         raise InputError(f"{kind} '{name}'", field, type(fun).__name__, "expected a casadi.Function")
     return _output_index(fun, out_name, f"{kind} '{name}'")

@@ -20,7 +20,7 @@ from . import motor
 from .arm import Arm, ArmSettings, build_arm
 from .._memo import Memo
 from ..errors import InputError
-from .integrators import make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
+from .integrators import check_implicit_steps, make_step, rk4_step_jacobians, rk4_substeps, step_jacobians
 from .parameters import BOUNDS, Bound, JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict
 from .rigid_body import RigidBodyDynamics
 from .thermal import ThermalNetwork, joint_heat_rhs, network_from_parameters
@@ -226,6 +226,8 @@ class ActuatedArm:
         n = u.shape[0]
         sim = self.step_function(dt_s, integrator).mapaccum(n)
         xs = np.vstack([x0, np.array(sim(x0, u.T, amb.reshape(1, -1))).T])
+        if integrator == "implicit_euler":  # its fixed Newton iterations, checked
+            check_implicit_steps(self.ode, float(dt_s), xs, u, amb.reshape(-1, 1))
         return Trajectory(self, np.arange(n + 1) * float(dt_s), xs, u, amb)
 
     def _simulation_inputs(self, x0, current_a, ambient_c) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

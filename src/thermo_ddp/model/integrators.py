@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 INTEGRATORS = ("rk4", "rk4_<m>", "implicit_euler")
 
@@ -38,7 +39,9 @@ def rk4_step(ode: ca.Function, dt: float, substeps: int = 1) -> ca.Function:
 def implicit_euler_step(ode: ca.Function, dt: float, newton_iterations: int = 4) -> ca.Function:
     """L-stable backward Euler, x+ = x + dt f(x+, u, p), solved by a fixed number of Newton steps
     from an explicit-Euler guess. Unrolled, so it stays an SX expression: exact derivatives of the
-    computed step and C code generation come for free. Stiff-safe for the thermal time scales."""
+    computed step and C code generation come for free. Stiff-safe for the thermal time scales. The fixed
+    count is checked where steps are simulated (:func:`check_implicit_steps`: the Newton residual of every
+    step, refused above :data:`IMPLICIT_RESIDUAL_TOL`)."""
     x, u, p = (ca.SX.sym(n, ode.size1_in(i)) for i, n in enumerate(ode.name_in()))
     z = ca.SX.sym("z", x.numel())
     residual = z - x - dt * ode(z, u, p)
@@ -47,6 +50,33 @@ def implicit_euler_step(ode: ca.Function, dt: float, newton_iterations: int = 4)
     for _ in range(newton_iterations):
         xn = newton(xn, x, u, p)
     return ca.Function("step", [x, u, p], [xn], ode.name_in(), ["x_next"])
+
+
+IMPLICIT_RESIDUAL_TOL = 1e-8   # largest |x+ - x - dt f(x+, u, p)| (scaled by 1 + |x+|) of an accepted step
+
+
+def implicit_euler_residual(ode: ca.Function, dt: float) -> ca.Function:
+    """``residual(x_next, x, u, p)``: the largest |x+ - x - dt f(x+, u, p)| / (1 + |x+|) of a backward Euler
+    step, the check of :func:`implicit_euler_step`'s fixed Newton iterations (see :func:`check_implicit_steps`)."""
+    x, u, p = (ca.SX.sym(n, ode.size1_in(i)) for i, n in enumerate(ode.name_in()))
+    xn = ca.SX.sym("x_next", x.numel())
+    r = (xn - x - dt * ode(xn, u, p)) / (1 + ca.fabs(xn))
+    return ca.Function("implicit_euler_residual", [xn, x, u, p], [ca.mmax(ca.fabs(r))],
+                       ["x_next", *ode.name_in()], ["residual"])
+
+
+def check_implicit_steps(ode: ca.Function, dt: float, xs, us, ps) -> float:
+    """The largest Newton residual of the backward Euler steps xs[k] -> xs[k+1] (rows; ``us``, ``ps`` per step);
+    ArithmeticError when one is above :data:`IMPLICIT_RESIDUAL_TOL` (the fixed Newton iterations did not converge:
+    the step's result is not a backward Euler step)."""
+    xs, us, ps = (np.atleast_2d(np.asarray(a, float)) for a in (xs, us, ps))
+    steps = us.shape[0]
+    res = np.asarray(implicit_euler_residual(ode, dt).map(steps)(xs[1:].T, xs[:-1].T, us.T, ps.T)).ravel()
+    worst = int(np.argmax(res)) if res.size else 0
+    if res.size and not res[worst] <= IMPLICIT_RESIDUAL_TOL:
+        raise ArithmeticError(f"implicit Euler step {worst}: Newton residual {res[worst]:.3g} > "
+                              f"{IMPLICIT_RESIDUAL_TOL:g} after a fixed number of iterations: shorten dt_s or use rk4")
+    return float(res.max(initial=0.0))
 
 
 def make_step(ode: ca.Function, dt: float, integrator: str = "rk4") -> ca.Function:

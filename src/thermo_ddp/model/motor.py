@@ -14,10 +14,37 @@ def resistance_ohm(m, winding_c):
     return m.resistance_ohm * (1 + m.copper_alpha_per_k * (winding_c - m.resistance_ref_c))
 
 
+def smooth_sign(m, velocity_rad_s):
+    """sign(v) smoothed so that derivatives exist: tanh(v / eps), eps = ``coulomb_smoothing_rad_s`` (the one
+    smoothing of every |v| and sign(v) of the model)."""
+    return ca.tanh(velocity_rad_s / m.coulomb_smoothing_rad_s)
+
+
+def smooth_abs(m, velocity_rad_s):
+    """|v| smoothed with the Coulomb friction's eps: v tanh(v / eps). Zero at rest with zero slope and
+    curvature 2 / eps there (so every heat term driven by it is smooth at v = 0, where a hold keeps the
+    joint); below |v| by at most 0.28 eps, and by less than 1e-8 |v| beyond 10 eps."""
+    return velocity_rad_s * smooth_sign(m, velocity_rad_s)
+
+
+def driver_power(value, exponent: float):
+    """``value ** exponent`` of a loss driver that is 0 at rest (e.g. :func:`smooth_abs`), with finite
+    derivatives there for every exponent >= 1: (x + d)^e - d^e with d = 1e-12, so that the second
+    derivative e (e - 1) x^(e-2) x'^2 of an exponent in (1, 2) is not inf * 0 at x = 0 (a change below
+    1e-11 in the value)."""
+    if exponent == 1:
+        return value
+    if float(exponent).is_integer():
+        return value ** exponent
+    return (value + _POWER_SHIFT) ** exponent - _POWER_SHIFT ** exponent
+
+
+_POWER_SHIFT = 1e-12
+
+
 def friction_torque_nm(m, velocity_rad_s):
-    """Joint-side friction: viscous + Coulomb smoothed by tanh so that derivatives exist."""
-    return (m.viscous_friction_nm_s_per_rad * velocity_rad_s
-            + m.coulomb_friction_nm * ca.tanh(velocity_rad_s / m.coulomb_smoothing_rad_s))
+    """Joint-side friction: viscous + Coulomb smoothed (:func:`smooth_sign`) so that derivatives exist."""
+    return m.viscous_friction_nm_s_per_rad * velocity_rad_s + m.coulomb_friction_nm * smooth_sign(m, velocity_rad_s)
 
 
 def joint_torque_nm(m, current_a, velocity_rad_s):
@@ -41,8 +68,8 @@ def joule_w(m, current_a, winding_c):
 
 
 def friction_w(m, velocity_rad_s):
-    """Mechanical power dissipated by friction, tau_f(v) v >= 0."""
-    return friction_torque_nm(m, velocity_rad_s) * velocity_rad_s
+    """Mechanical power dissipated by friction, tau_f(v) v = b v^2 + F_c |v|_smooth >= 0 (smooth at v = 0)."""
+    return m.viscous_friction_nm_s_per_rad * velocity_rad_s ** 2 + m.coulomb_friction_nm * smooth_abs(m, velocity_rad_s)
 
 
 def losses_w(m, current_a, velocity_rad_s, winding_c) -> dict:
@@ -51,7 +78,7 @@ def losses_w(m, current_a, velocity_rad_s, winding_c) -> dict:
     return {"joule_w": joule_w(m, current_a, winding_c),
             "friction_w": friction_w(m, velocity_rad_s),
             "current_sq_a2": current_a ** 2,
-            "speed_abs_rad_s": ca.fabs(velocity_rad_s)}
+            "speed_abs_rad_s": smooth_abs(m, velocity_rad_s)}
 
 
 def current_for_torque_a(m, torque_nm, velocity_rad_s=0.0):

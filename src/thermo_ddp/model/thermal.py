@@ -77,7 +77,7 @@ def feature_key(name: str, exponent: float = 1.0) -> str:
 def feature_value(powers: Mapping[str, object], name: str, exponent: float = 1.0):
     """``powers[name] ** exponent``, or its held mean when ``powers`` has it under :func:`feature_key`."""
     key = feature_key(name, exponent)
-    return powers[key] if key in powers else powers[name] ** exponent
+    return powers[key] if key in powers else motor.driver_power(powers[name], exponent)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW
-from ..tasks._common import default_limit_c
+from ..tasks.limits import default_limit_c
 from .controller import ControlStep, RecedingHorizonController, planning_problem
 from .observer import ExtendedKalmanFilter, ObserverSettings
 from .plant import Measurement, Plant, perturbed_model

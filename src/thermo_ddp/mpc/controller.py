@@ -23,13 +23,14 @@ import logging
 import casadi as ca
 import numpy as np
 
-from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, longest_feasible_hold, \
-    make_solver, time_to_limit_s
+from ..tasks.attempts import solve_until_verdict
+from ..tasks.hold_search import longest_feasible_hold
+from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
 from ..model.actuated import ActuatedArm
 from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
-from ..tasks._common import default_limit_c
+from ..tasks.limits import default_limit_c
 from .settings import MPCSettings
 
 log = logging.getLogger(__name__)
@@ -183,11 +184,14 @@ class RecedingHorizonController:
             result = self.solver.solve(lp.x0, self.window(0), initial_guess(lp.with_hold(self.hold_s)))
             total, iterations, solves = total + result.solve_s, iterations + result.iterations, solves + 1
         if not self._acceptable(result, False) and self.hold_knots > 0:
+            def probe(task, warm):  # DDP alone: a real-time loop does not fall back to IPOPT
+                return solve_until_verdict([("ddp", lambda: self.solver.solve(task.x0, task.params,
+                                                                               warm or initial_guess(task)))])
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
-            search = longest_feasible_hold(lp.with_hold(self.hold_s), self.solver, estimate)
-            solves, total = solves + len(search.probes), total + search.solve_s
-            if search.knots >= 0:
-                best_lp, best = search.best
+            search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s))
+            solves, total = solves + len(search.results), total + search.solve_s
+            if search.knots >= 0 and search.failed is None:
+                best_lp, best = search.best[0], search.best[1].result
                 log.info("requested hold %.1f s infeasible from the estimated state; planning %.1f s",
                          self.hold_s, best_lp.hold_s)
                 self.hold_knots, result, status = best_lp.hold_knots[1] - best_lp.hold_knots[0], best, "hold_shortened"

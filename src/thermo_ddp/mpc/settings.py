@@ -4,7 +4,7 @@ faults). ``MPCSettings`` composes them; ``MPCSettings.from_options`` routes flat
 
 Times in s, temperatures in °C. Scenario: lift ``payload_kg``, hold ``hold_s`` (shortened online when it
 becomes infeasible), lower; the TRUE winding must stay under ``limit_c`` (None: the parameter file's
-default, :func:`thermo_ddp.tasks._common.default_limit_c`); the planner uses ``limit_c - backoff_c``.
+default, :func:`thermo_ddp.tasks.limits.default_limit_c`); the planner uses ``limit_c - backoff_c``.
 """
 from __future__ import annotations
 

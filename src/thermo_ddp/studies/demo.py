@@ -9,7 +9,8 @@ from .._config import require
 from ..model.actuated import load_model
 from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import BOUNDS, Bound
-from ..tasks._common import DEFAULT_HOLD_S, HOLD_S, first_crossing, limit_pair_c
+from ..tasks.limits import DEFAULT_HOLD_S, HOLD_S, limit_pair_c
+from ..tasks.thermal_hold import first_crossing
 
 _SRC = "hold_demo"
 DT_S = Bound(1e-4, 0.1, "s", "the step resolves the arm's fast modes; the hold's steps are bounded by hold_s / dt_s")

@@ -47,7 +47,7 @@ from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.figure import plot_thermal_diagnosis
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
-from ..tasks._common import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
+from ..tasks.limits import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,

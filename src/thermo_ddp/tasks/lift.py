@@ -2,7 +2,7 @@
 
 The lift is a problem built on the general OCP layer (the solvers know nothing of it):
 - state x = [q, v, T_nodes] of the elbow, control u = winding current, per-knot parameter
-  p = [q_ref, tracking weight, hold flag, ambient_c, direction];
+  p = [q_ref, sqrt(tracking weight), hold flag, ambient_c, direction, the request's numbers];
 - costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
   (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
 - constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
@@ -15,8 +15,10 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
   reversal) and ``terminal_rest``;
 - with ``acceleration_limit_rad_s2`` (off by default), the constraint ``acceleration_limit`` on the mean
   acceleration over each step (e.g. :func:`reference_acceleration_limit`).
-When the requested hold is infeasible, the longest feasible hold is found by bisection over
-complete optimisations (each a feasibility verdict of the solver), not guessed.
+When the requested hold is infeasible, the longest feasible hold is found by complete optimisations (each a
+verdict of the solver), placed by a thermal prediction (:mod:`thermo_ddp.tasks.hold_search`), not guessed.
+A solve without a verdict is retried (:mod:`thermo_ddp.tasks.attempts`); the plan is ``failed`` when no
+retry reaches one (:mod:`thermo_ddp.tasks.lift_plan`).
 """
 from __future__ import annotations
 
@@ -36,11 +38,15 @@ from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import Bound, load_parameters, packaged_parameter_file
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
-from ._common import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, PlanSeries, TaskProblem, binding_constraints,
-                      check_fields, check_idle_below_limits, check_in_joint_range, check_knots, check_limit_c,
-                      format_s, initial_guess, is_feasible, joint_limit_c, joint_limit_constraints,
-                      joint_range_rad, limit_pair_c, MotionQuality, solver_summary, stop_approach,
-                      time_to_limit_by_joint, winding_limits_c)
+from .attempts import Outcome, SolverLadder
+from .constraints import joint_limit_constraints, stop_approach
+from .hold_search import longest_feasible_hold, predicted_hold_knots, predicted_peak_winding_c
+from .lift_plan import LiftPlan, LimitComparison, joule_energy_j, stop_approach_time_s  # noqa: F401 (public here)
+from .limits import (DEFAULT_HOLD_S, HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_in_joint_range,
+                     check_knots, check_limit_c, joint_limit_c, joint_range_rad, limit_pair_c, winding_limits_c)
+from .problem import TaskProblem, initial_guess
+from .thermal_hold import time_to_limit_by_joint
+from .verdicts import binding_constraints, cause_of, deciding_constraints, is_feasible, solver_summary  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -48,10 +54,13 @@ log = logging.getLogger(__name__)
 # and its weight, 1 on the hold's knots, the room; ``direction``: the sign the velocity may take (the lift's,
 # the lowering's), 0 while holding; then every number of the request (payload, limit, angles, weights, motion
 # bounds), constant over the knots. Only the model's structure, the time step and the integrator are compiled.
+# The cost weights enter as their square roots (``sqrt_<weight>``), the factor of a least-squares residual: so
+# every derivative, also with respect to the parameters (IPOPT's), is finite at a zero weight (issue 23; the
+# Joule residual sqrt(w) sqrt(R dt) i, as sqrt(w R dt) i, had 0/0 in d/dT at w = 0).
 _REQUEST = ("payload_kg", "limit_c", "goal_rad", "start_rad", "hold_tolerance_rad", "velocity_limit_rad_s",
-            "energy_weight", "velocity_weight", "acceleration_weight", "acceleration_limit_rad_s2", "stop_speed_rad_s",
-            "stop_slope_per_s", "one_way_tolerance_rad_s")
-LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
+            "sqrt_energy_weight", "sqrt_velocity_weight", "sqrt_acceleration_weight", "acceleration_limit_rad_s2",
+            "stop_speed_rad_s", "stop_slope_per_s", "one_way_tolerance_rad_s")
+LIFT_PARAMETERS = KnotParameters((("q_ref_rad", 1), ("sqrt_tracking_weight", 1), ("hold_flag", 1), ("ambient_c", 1),
                                   ("direction", 1), *((name, 1) for name in _REQUEST)))
 
 SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
@@ -90,7 +99,7 @@ class LiftSettings:
     """The lift scenario and its transcription (all times in s, angles in rad).
 
     ``limit_c``: the winding limit (None: the elbow parameter file's, see
-    :func:`thermo_ddp.tasks._common.default_limit_c`; :func:`build_lift_problem` fills it in)."""
+    :func:`thermo_ddp.tasks.limits.default_limit_c`; :func:`build_lift_problem` fills it in)."""
 
     payload_kg: float = 40.0
     limit_c: float | None = None
@@ -193,10 +202,11 @@ def _reference(settings: LiftSettings, hold_s: float, ambient_c: float) -> tuple
     direction = np.zeros(q_ref.size)
     direction[:first] = np.sign(g - s0)               # lifting: toward the goal only
     direction[first + hold + 1:] = np.sign(s0 - g)    # lowering and resting: toward the start only
-    request = {name: getattr(settings, name) for name in _REQUEST}
+    request = {name: math.sqrt(getattr(settings, name[5:])) if name.startswith("sqrt_") else getattr(settings, name)
+               for name in _REQUEST}
     if request["acceleration_limit_rad_s2"] is None:
         request["acceleration_limit_rad_s2"] = 0.0  # no bound: no function reads it
-    p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, tracking_weight=settings.tracking_weight,
+    p = LIFT_PARAMETERS.values(q_ref.size, q_ref_rad=q_ref, sqrt_tracking_weight=math.sqrt(settings.tracking_weight),
                                hold_flag=flag, ambient_c=ambient_c, direction=direction, **request)
     return p, (first, first + hold)
 
@@ -227,12 +237,12 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
 
     joule = motor.resistance_ohm(m, winding) * settings.dt_s
     costs = (
-        Cost("tracking", 1.0, stage("tracking", ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"]))),
-        Cost("joule_energy", 1.0, stage("joule_energy", ca.sqrt(par["energy_weight"] * joule) * u[0])),
-        Cost("velocity", 1.0, stage("velocity", ca.sqrt(par["velocity_weight"]) * v)),
+        Cost("tracking", 1.0, stage("tracking", par["sqrt_tracking_weight"] * (q - par["q_ref_rad"]))),
+        Cost("joule_energy", 1.0, stage("joule_energy", par["sqrt_energy_weight"] * ca.sqrt(joule) * u[0])),
+        Cost("velocity", 1.0, stage("velocity", par["sqrt_velocity_weight"] * v)),
     )
     terminal_costs = (
-        Cost("terminal_tracking", 1.0, terminal("terminal_tracking", ca.sqrt(par["tracking_weight"]) * (q - start))),
+        Cost("terminal_tracking", 1.0, terminal("terminal_tracking", par["sqrt_tracking_weight"] * (q - start))),
         Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
     limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"])
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
@@ -246,8 +256,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     if settings.careful_motion:
         still = par["one_way_tolerance_rad_s"]
         acceleration = model.runtime_payload_functions[0](x, u, env)[model.index(joint, "v_rad_s")]
-        costs += (Cost("acceleration", 1.0, stage("acceleration", ca.sqrt(par["acceleration_weight"] * settings.dt_s)
-                                                   * acceleration)),)
+        costs += (Cost("acceleration", 1.0, stage("acceleration", par["sqrt_acceleration_weight"]
+                                                   * math.sqrt(settings.dt_s) * acceleration)),)
         constraints += (
             Constraint("stop_approach", stage("stop_approach", stop_approach(
                 model, joint, x, par["stop_speed_rad_s"], par["stop_slope_per_s"]), "g")),
@@ -261,6 +271,12 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
         constraints += (Constraint("acceleration_limit", stage("acceleration_limit",
                                                                ca.vertcat(mean - amax, -mean - amax), "g")),)
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a
+
+
+def lift_terms(model: ActuatedArm, settings: LiftSettings):
+    """The lift's costs, terminal costs, constraints, terminal constraints (functions of one model's x, u, p)
+    and its current peak: what the robust lift (:mod:`thermo_ddp.tasks.robust`) imposes per scenario."""
+    return _functions(model, settings)[2:]
 
 
 _PROBLEMS = Memo()  # the lift's OCP by what its functions are built from (the horizon aside)
@@ -323,194 +339,109 @@ def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limi
                                   horizon_s, dt_s)[joint]
 
 
-@dataclasses.dataclass(frozen=True)
-class HoldSearch:
-    """The probes of :func:`longest_feasible_hold`: hold (knots) -> (problem, result)."""
+def plan_lift(payload_kg: float | None = None, limit_c: float | None = None, hold_s: float | None = None, *,
+              settings: LiftSettings | None = None, uncertainty=None, **options) -> LiftPlan:
+    """Plan lifting ``payload_kg`` at the gripper (default 40 kg) to horizontal, holding ``hold_s`` (default
+    :data:`DEFAULT_HOLD_S`), lowering back, with the winding kept under ``limit_c`` (None: the elbow
+    parameter file's limit). Give either a :class:`LiftSettings` (``settings=``) or its fields as keywords.
+    ``uncertainty``: a fraction (every thermal value within +-fraction), ``"file"`` (the parameter file's
+    ``[uncertainty]``) or a :class:`thermo_ddp.tasks.robust.Uncertainty`: the plan then keeps every motor of
+    that set under the limit (:func:`thermo_ddp.tasks.robust.plan_robust_lift`).
 
-    knots: int  # the longest feasible hold in knots; -1 when not even touching the goal is feasible
-    probes: Mapping[int, tuple[LiftProblem, SolverResult]]
-
-    @property
-    def best(self) -> tuple[LiftProblem, SolverResult]:
-        """The longest feasible probe, or the shortest infeasible one when none is feasible."""
-        return self.probes[self.knots if self.knots >= 0 else min(self.probes)]
-
-    @property
-    def solve_s(self) -> float:
-        return sum(r.solve_s for _, r in self.probes.values())
-
-
-def neighbour_warm_start(result: SolverResult) -> WarmStart:
-    """The warm start of a lift from the solution of the same lift with another hold: its trajectories only.
-
-    Its multipliers sit on the other hold's knots (the lowering is shifted) and come with the penalty that
-    solve ended at (1e6 near the boundary): DDP restarted with them crawled or stalled (the 84 °C careful
-    search: 769 backward and 3,503 forward passes with them, 445 and 1,107 without; one knot longer hold at
-    94 °C, N = 200: 200 iterations without convergence, 36 without them). IPOPT's searches took as many
-    iterations either way."""
-    return WarmStart(result.xs, result.us)
-
-
-def longest_feasible_hold(lp: LiftProblem, solver, estimate_s: float) -> HoldSearch:
-    """The longest hold, up to the requested one (the fixed horizon), that the solver finds feasible.
-
-    A galloping search from ``estimate_s`` (the time-to-limit at the goal) brackets the boundary, then
-    bisection closes it; every verdict is a complete optimisation, warm-started from the nearest
-    feasible probe. A feasible request costs one solve when the estimate says it fits.
-    """
-    probes: dict[int, tuple[LiftProblem, SolverResult]] = {}
-
-    def feasible(knots: int) -> bool:
-        if knots not in probes:
-            probe = lp.with_hold(knots * lp.settings.dt_s)
-            done = [k for k, (_, r) in probes.items() if is_feasible(r)]
-            warm = neighbour_warm_start(probes[min(done, key=lambda k: abs(k - knots))][1]) if done else None
-            probes[knots] = (probe, solve(probe, solver, warm))
-            log.info("hold %.1f s: %s", probe.hold_s, probes[knots][1].status)
-        return is_feasible(probes[knots][1])
-
-    top = lp.hold_knots[1] - lp.hold_knots[0]  # the request
-    guess = int(np.clip(np.floor(estimate_s / lp.settings.dt_s), 0, top))
-    lo, hi, step = -1, top + 1, 1
-    if feasible(guess):
-        lo = guess
-        while lo + step < hi and feasible(lo + step):
-            lo, step = lo + step, 2 * step
-        hi = min(hi, lo + step)
-    else:
-        hi = guess
-        while hi - step >= 0 and not feasible(hi - step):
-            hi, step = hi - step, 2 * step
-        lo = hi - step if hi - step >= 0 else -1
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
-    return HoldSearch(lo, probes)
-
-
-@dataclasses.dataclass(frozen=True)
-class LiftPlan(PlanSeries):
-    """The answer of :func:`plan_lift` (contract: ``to_dict()`` is the plan JSON)."""
-
-    feasible: bool
-    status: str
-    message: str
-    settings: LiftSettings
-    achieved_hold_s: float
-    time_s: np.ndarray
-    xs: np.ndarray
-    us: np.ndarray
-    model: ActuatedArm
-    solver: Mapping[str, Any]
-    binding_constraints: tuple[str, ...]
-    time_to_limit_s: float
-
-    @property
-    def motion(self) -> MotionQuality:
-        """Reversals, speed near the stops, rest at the end, acceleration (see :class:`MotionQuality`)."""
-        lo, hi = (b[0] for b in joint_range_rad(self.model))
-        return MotionQuality.of(self.time_s, self.xs[:, 0], self.xs[:, 1], lo, hi)
-
-    def to_dict(self) -> dict:
-        s = self.settings
-        return self.contract_dict(s.payload_kg, s.limit_c, s.hold_s, self.achieved_hold_s, s.integrator, s.dt_s)
-
-    def report(self) -> str:
-        w, c, m = self.series("winding_c").max(), self.sensor_c().max(), self.motion
-        return "\n".join([
-            f"lift {self.settings.payload_kg:g} kg, winding limit {self.settings.limit_c:g} °C: "
-            f"{'FEASIBLE' if self.feasible else 'INFEASIBLE'} ({self.status})",
-            f"  {self.message}",
-            f"  hold requested {self.settings.hold_s:.1f} s, achieved {self.achieved_hold_s:.1f} s; "
-            f"time to limit at the goal {format_s(self.time_to_limit_s)}",
-            f"  peak winding {w:.1f} °C, peak casing {c:.1f} °C, peak |current| {np.abs(self.us).max():.2f} A",
-            f"  binding: {', '.join(self.binding_constraints) or 'none'}",
-            f"  motion: {m.reversals} reversal(s), {m.max_speed_near_stop_rad_s:.2f} rad/s at most within 0.1 rad of "
-            f"a stop, {m.final_speed_rad_s:.3f} rad/s at the end, {m.max_acceleration_rad_s2:.1f} rad/s² at most",
-            f"  solver {self.solver['name']}: {self.solver['iterations']} iterations, "
-            f"{1e3 * self.solver['solve_s']:.1f} ms (all solves {1e3 * self.solver['total_solve_s']:.1f} ms)"])
-
-    def plot(self, path) -> None:
-        from .plots import plot_lift
-        plot_lift(self, path)
-
-
-def plan_lift(payload_kg: float = 40.0, limit_c: float | None = None, hold_s: float = DEFAULT_HOLD_S,
-              **options) -> LiftPlan:
-    """Plan lifting ``payload_kg`` at the gripper to horizontal, holding ``hold_s``, lowering back,
-    with the winding kept under ``limit_c`` (None: the elbow parameter file's limit).
-    Options: the fields of :class:`LiftSettings`."""
-    settings = settings_from_mapping(LiftSettings, {"payload_kg": payload_kg, "limit_c": limit_c,
-                                                    "hold_s": hold_s, **options}, _SRC)
+    A solve that reaches no verdict is retried (:class:`SolverLadder`); when none does, the plan is
+    ``failed``, never infeasible."""
+    settings = _lift_settings(payload_kg, limit_c, hold_s, settings, options)
+    if uncertainty is not None:
+        from .robust import plan_robust_lift
+        return plan_robust_lift(settings, uncertainty)
     lp = build_lift_problem(settings)
-    settings, limit_c = lp.settings, lp.settings.limit_c
-    solver = make_solver(lp)
-    top = lp.hold_knots[1] - lp.hold_knots[0]
+    settings = lp.settings  # the limit and speed bound filled in
+    ladder = SolverLadder(lp.problem, make_solver(lp))
+
+    def solve_probe(probe: LiftProblem, warm: WarmStart | None) -> Outcome:
+        return ladder.solve(probe, warm or initial_guess(probe))
+
     if settings.find_longest_hold:
-        # the search's first guess needs the time to limit only up to the requested hold
-        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, limit_c,
+        # first probe: the time to the limit holding at the goal from the start's temperatures (the lift's
+        # own heat aside, so a little long: the infeasible plan it gives predicts the boundary well)
+        estimate = time_to_limit_s(lp.model, lp.x0, settings.goal_rad, settings.limit_c,
                                    horizon_s=settings.hold_s + settings.dt_s)
-        search = longest_feasible_hold(lp, solver, estimate)
-        (lp, result), total, solves, knots = search.best, search.solve_s, len(search.probes), search.knots
-        every = [r for _, r in search.probes.values()]
+        search = longest_feasible_hold(lp, solve_probe, int(min(estimate, settings.hold_s) / settings.dt_s))
+        (lp_best, outcome), knots, results = search.best, search.knots, search.results
+        probes = len(search.probes)
     else:
-        result = solve(lp, solver)
-        total, solves, knots, every = result.solve_s, 1, top if is_feasible(result) else -1, [result]
-    achieved = max(knots, 0) * settings.dt_s
-    if knots == top:
-        status, message, achieved = "feasible", f"holds {settings.hold_s:.1f} s under {limit_c:g} °C", hold_s
-    elif knots < 0 or not settings.find_longest_hold:
-        status = "infeasible"
-        message = (f"the payload cannot be lifted under {limit_c:g} °C" if settings.find_longest_hold else
-                   f"the {hold_s:.1f} s hold is infeasible") + f" ({result.message})"
+        lp_best = lp
+        outcome = solve_probe(lp, None)
+        knots, results, probes = (lp.hold_knots[1] - lp.hold_knots[0]) if outcome.feasible else -1, outcome.results, 1
+    return _plan(lp, lp_best, outcome, knots, results, probes)
+
+
+def _lift_settings(payload_kg, limit_c, hold_s, settings: LiftSettings | None, options: Mapping) -> LiftSettings:
+    """The request as :class:`LiftSettings`: ``settings`` itself, or the keywords (not both)."""
+    given = {k: v for k, v in (("payload_kg", payload_kg), ("limit_c", limit_c), ("hold_s", hold_s)) if v is not None}
+    if settings is not None:
+        require(isinstance(settings, LiftSettings), _SRC, "settings", type(settings).__name__,
+                "expected a LiftSettings")
+        require(not given and not options, _SRC, "settings", "LiftSettings(...)",
+                f"give settings or keyword options, not both (also given: {', '.join([*given, *options])})")
+        return settings
+    return settings_from_mapping(LiftSettings, {**given, **options}, _SRC)
+
+
+def _plan(lp: LiftProblem, best: LiftProblem, outcome: Outcome, knots: int, results, probes: int) -> LiftPlan:
+    """The plan of the decisive probe: status, sentence, cause and remedy (see :mod:`.lift_plan`)."""
+    s, result = lp.settings, outcome.result
+    top = lp.hold_knots[1] - lp.hold_knots[0]
+    if outcome.verdict is None:
+        status, cause, remedy = "failed", None, ""
+        message = f"no solve reached a verdict ({outcome.tried()}); nothing is known about this lift"
     else:
-        status = "infeasible_hold"
-        message = f"a {hold_s:.1f} s hold is infeasible; the longest feasible hold is {achieved:.1f} s"
-    binding = tuple(binding_constraints(lp, result))
-    if status != "feasible" and binding:
-        message += f"; binding: {', '.join(binding)}"
-    ttl = time_to_limit_s(lp.model, result.xs[lp.hold_knots[0]], settings.goal_rad, limit_c)
-    summary = solver_summary(result, total, solves, every, name=settings.solver)
-    return LiftPlan(status == "feasible", status, message, settings, float(achieved), lp.time_s, result.xs,
-                    result.us, lp.model, summary, binding, ttl)
+        status = ("feasible" if knots == top else "infeasible" if knots < 0 or not s.find_longest_hold
+                  else "infeasible_hold")
+        cause, remedy = (None, "") if status == "feasible" else _cause(lp, best, outcome)
+        message = ""
+    achieved = s.hold_s if status == "feasible" else max(knots, 0) * s.dt_s
+    ttl = time_to_limit_s(lp.model, result.xs[best.hold_knots[0]], s.goal_rad, s.limit_c)
+    summary = solver_summary(result, sum(r.solve_s for r in results), len(results), results, name=s.solver,
+                             probes=probes, attempts=[name for name, _ in outcome.attempts])
+    plan = LiftPlan(status == "feasible", status, message, s, float(achieved), lp.time_s, result.xs, result.us,
+                    lp.model, summary, tuple(binding_constraints(best, result)), ttl, cause, remedy)
+    return dataclasses.replace(plan, message=plan.headline() + (f"; {remedy}" if remedy else ""))
 
 
-@dataclasses.dataclass(frozen=True)
-class LimitComparison:
-    """The same lift planned under several winding limits."""
-
-    plans: tuple[LiftPlan, ...]
-
-    def rows(self) -> list[dict]:
-        return [{"limit_c": p.settings.limit_c, "feasible": p.feasible, "hold_s": p.achieved_hold_s,
-                 "peak_winding_c": float(p.series("winding_c").max()),
-                 "peak_casing_c": float(p.sensor_c().max()),
-                 "joule_energy_j": joule_energy_j(p), "binding": ", ".join(p.binding_constraints),
-                 "solve_s": p.solver["total_solve_s"]} for p in self.plans]
-
-    def table(self) -> str:
-        p0 = self.plans[0].settings
-        head = (f"{p0.payload_kg:g} kg at the gripper, requested hold {p0.hold_s:g} s\n"
-                f"{'limit °C':>9} {'feasible':>9} {'hold s':>7} {'winding °C':>11} {'casing °C':>10} "
-                f"{'Joule kJ':>9} {'solve s':>8}  binding")
-        lines = [f"{r['limit_c']:9.0f} {str(r['feasible']):>9} {r['hold_s']:7.1f} {r['peak_winding_c']:11.1f} "
-                 f"{r['peak_casing_c']:10.1f} {r['joule_energy_j'] / 1e3:9.2f} {r['solve_s']:8.2f}  {r['binding']}"
-                 for r in self.rows()]
-        return "\n".join([head, *lines])
-
-
-def joule_energy_j(plan: LiftPlan) -> float:
-    """Heat put into the winding over the plan, sum of R(T_w) i^2 dt."""
-    joule = plan.model.outputs.map(plan.us.shape[0])
-    amb = np.full((1, plan.us.shape[0]), plan.model.ambient_c)
-    power = np.array(joule(plan.xs[:-1].T, plan.us.T, amb)[plan.model.outputs.name_out().index("joule_w")])
-    return float(power.sum() * plan.settings.dt_s)
+def _cause(lp: LiftProblem, best: LiftProblem, outcome: Outcome) -> tuple[str | None, str]:
+    """The cause class of a verdict short of the request and the number a user can change."""
+    names = deciding_constraints(best, outcome.result, violated=not outcome.feasible)
+    s, held = lp.settings, best.hold_knots[1] - best.hold_knots[0]
+    # the heat decides a hold cut short; a lift that fails outright only when the replayed heat exceeds the limit
+    heat = outcome.feasible or predicted_hold_knots(lp, (best, outcome.result)) < held
+    cause = cause_of(names, heat)
+    if cause == "thermal":
+        need = predicted_peak_winding_c(lp, (best, outcome.result), lp.hold_knots[1] - lp.hold_knots[0])
+        return cause, f"the {s.hold_s:g} s hold needs limit_c >= {math.ceil(need * 10) / 10:.1f} °C"
+    if cause == "motion":
+        lo, hi = (float(b[0]) for b in joint_range_rad(lp.model))
+        need = stop_approach_time_s(lo, hi, s.start_rad, s.goal_rad, s.stop_speed_rad_s, s.stop_slope_per_s,
+                                    s.velocity_limit_rad_s)
+        knots = math.ceil(need / s.dt_s - 1e-9)
+        short = [name for name in ("lift_s", "lower_s") if getattr(s, name) < knots * s.dt_s - 1e-9]
+        return cause, (f"{names[0]} binds: {' and '.join(short or ['lift_s'])} >= {knots * s.dt_s:.2f} s "
+                       f"({knots} steps; the speed allowed near the stops alone takes {need:.2f} s), "
+                       "or careful_motion off")
+    if cause == "actuator":
+        peak = lp.model.params[lp.model.joints[0]].motor.current_peak_a
+        hold = float(np.abs(lp.model.static_current_a([s.goal_rad])).max())
+        return cause, (f"{names[0]} binds: holding {s.payload_kg:g} kg at the goal takes {hold:.1f} A of the "
+                       f"{peak:g} A peak; a lighter payload or longer lift_s")
+    if cause == "range":
+        return cause, f"{names[0]} binds: keep goal_rad and start_rad inside the joint range with hold_tolerance_rad"
+    return None, ""
 
 
 def compare_limits(payload_kg: float = 40.0, limits_c=None, hold_s: float = DEFAULT_HOLD_S,
                    **options) -> LimitComparison:
     """:func:`plan_lift` under each winding limit; by default the elbow file's cut-off and short-term
-    winding limit (:func:`thermo_ddp.tasks._common.limit_pair_c`: 84 °C and 140 °C)."""
+    winding limit (:func:`thermo_ddp.tasks.limits.limit_pair_c`: 84 °C and 140 °C)."""
     params = load_parameters(options.get("parameter_file") or packaged_parameter_file(ELBOW))
     limits_c = limit_pair_c(params) if limits_c is None else tuple(limits_c)
     require(0 < len(limits_c) <= MAX_LIMITS, _SRC, "limits_c", limits_c,

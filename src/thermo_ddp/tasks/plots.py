@@ -6,8 +6,9 @@ import numpy as np
 from .._figures import new_figure
 
 
-def plot_lift(plan, path) -> None:
-    """Four panels: angle; current and voltage; winding and casing vs the limit and the cut-off."""
+def plot_lift(plan, path=None):
+    """Four panels: angle; current; voltage; winding and casing vs the limit and the cut-off. Written to
+    ``path`` when given; the Figure is returned either way."""
     t = plan.time_s
     joint = plan.model.joints[0]
     params = plan.model.params[joint]
@@ -32,6 +33,8 @@ def plot_lift(plan, path) -> None:
     for a in ax:
         a.legend(loc="best", fontsize=8)
         a.grid(alpha=0.3)
-    ax[0].set_title(f"{plan.settings.payload_kg:g} kg lift, limit {plan.settings.limit_c:g} °C: {plan.status}")
+    ax[0].set_title(plan.headline(), fontsize=10, wrap=True)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    if path is not None:
+        fig.savefig(path, dpi=100)
+    return fig

@@ -28,8 +28,10 @@ from ..model import motor
 from ..model.actuated import ActuatedArm
 from ..model.arm import ELBOW
 from ..model.rigid_body import RigidBodyDynamics
-from ._common import (finite_or_none, hold_temperatures, joint_range_rad, limiting_joint, thermal_rhs_function,
-                      thermal_step_function, time_to_limit_by_joint, winding_indices, winding_limits_c)
+from .limits import joint_range_rad, winding_limits_c
+from .series import finite_or_none
+from .thermal_hold import (hold_temperatures, limiting_joint, thermal_rhs_function, thermal_step_function,
+                           time_to_limit_by_joint, winding_indices)
 
 log = logging.getLogger(__name__)
 HOLD_DT_S = 2.0           # thermal-only RK4 step of the posture objective (winding tau >= 30 s)

@@ -31,10 +31,14 @@ from ..model.arm import ELBOW, LEFT_ARM, PAYLOAD_KG
 from ..model.parameters import Bound
 from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
 from ..solvers import DDPSettings, DDPSolver, WarmStart
-from ._common import (DEFAULT_HOLD_S, HOLD_S, PlanSeries, TaskProblem, binding_constraints, check_fields,
-                      check_knots, check_limit_c, finite_or_none,
-                      format_s, initial_guess, is_feasible, joint_limit_constraints, limiting_joint, solver_summary,
-                      time_to_limit_by_joint, violated_constraints, winding_limits_c)
+from .constraints import joint_limit_constraints
+from .limits import DEFAULT_HOLD_S, HOLD_S, check_fields, check_knots, check_limit_c, winding_limits_c
+from .problem import TaskProblem, initial_guess
+from .series import PlanSeries, finite_or_none, format_s
+from .thermal_hold import limiting_joint, time_to_limit_by_joint
+from .attempts import SolverLadder, rest_guess, solve_until_verdict
+from .verdicts import (CAUSE_WORDS, binding_constraints, cause_of, deciding_constraints, solver_summary, verdict,
+                       violated_constraints)
 from .lift import SETTING_BOUNDS as LIFT_BOUNDS
 from .lift import min_jerk
 from .posture import (PostureChoice, evaluate_posture, hanging_posture, naive_posture, optimal_posture,
@@ -208,15 +212,34 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
 
 
 def solve_hold(hp: HoldProblem, settings: WholeArmSettings, warm_start: WarmStart | None = None):
-    """Gauss-Newton iLQR (robust from the gapped initial guess), then full DDP warm-started from it when
-    not yet converged (the R(T) i^2 curvature of an active winding limit). Returns (result, summary).
+    """Solve until a verdict (:mod:`thermo_ddp.tasks.attempts`): first Gauss-Newton iLQR (robust from the gapped
+    initial guess), then full DDP warm-started from it when not yet converged (the R(T) i^2 curvature of an
+    active winding limit); without a verdict, a regularised restart, the same from rest, then IPOPT.
+    Returns (outcome, summary).
 
     Full DDP from the cold guess fails on the 4-joint arm: the dynamics-tensor term makes the value
     Hessians indefinite and Quu regularisation does not bound them."""
-    stages, result = [], None
-    warm = warm_start or initial_guess(hp)
+    stages: list[dict] = []
+    guess = warm_start or initial_guess(hp)
+    ladder = SolverLadder(hp.problem, None, DDPSettings(backend=settings.ddp_backend,
+                                                        max_iterations=max(settings.max_iterations, 1)))
+    outcome = solve_until_verdict((
+        ("ddp", lambda: _staged(hp, settings, guess, stages)),
+        ("ddp regularised restart", lambda: ladder.restart.solve(hp.x0, hp.params, WarmStart(guess.xs, guess.us))),
+        ("ddp regularised from rest", lambda: ladder.restart.solve(hp.x0, hp.params, rest_guess(hp))),
+        ("ipopt", lambda: ladder.reference.solve(hp.x0, hp.params, WarmStart(guess.xs, guess.us)))))
+    results = outcome.results
+    solve_s = sum(r.solve_s for r in results)
+    summary = solver_summary(outcome.result, solve_s, len(results) - 1 + len(stages), results, solve_s=solve_s,
+                             stages=stages, attempts=[name for name, _ in outcome.attempts])
+    return outcome, summary
+
+
+def _staged(hp: HoldProblem, settings: WholeArmSettings, warm: WarmStart, stages: list[dict]):
+    """Gauss-Newton iLQR, then full DDP from it unless already feasible (each stage recorded in ``stages``)."""
+    result = None
     for full, iterations in ((False, settings.gauss_newton_iterations), (True, settings.max_iterations)):
-        if iterations == 0 or (result is not None and is_feasible(result)):
+        if iterations == 0 or (result is not None and verdict(result) == "feasible"):
             continue
         solver = DDPSolver(hp.problem, DDPSettings(full_second_order=full, backend=settings.ddp_backend,
                                                    max_iterations=iterations))
@@ -224,10 +247,7 @@ def solve_hold(hp: HoldProblem, settings: WholeArmSettings, warm_start: WarmStar
         warm = WarmStart.from_result(result)
         stages.append({"full_second_order": full, "status": result.status, "iterations": int(result.iterations),
                        "solve_s": float(result.solve_s), "build_s": float(solver.build_s)})
-    solve_s = sum(st["solve_s"] for st in stages)
-    summary = solver_summary(result, solve_s, len(stages), iterations=sum(st["iterations"] for st in stages),
-                             solve_s=solve_s, stages=stages)
-    return result, summary
+    return result
 
 
 @dataclasses.dataclass(frozen=True)
@@ -256,6 +276,7 @@ class WholeArmPlan(PlanSeries):
     violated_constraints: tuple[str, ...]
     time_to_limit_by_joint_s: Mapping[str, float]
     limits_c: Mapping[str, float]
+    cause: str | None = None   # thermal | actuator | motion | range when infeasible (see tasks.verdicts.CAUSES)
 
     @property
     def limiting_joint(self) -> str:
@@ -291,9 +312,7 @@ class WholeArmPlan(PlanSeries):
                         f"{format_s(nv.time_to_limit_s[j]):>8} {p.q_rad[k]:9.3f} {p.current_a[k]:9.2f} "
                         f"{format_s(p.time_to_limit_s[j]):>9} {wmax[k]:11.1f}")
         return "\n".join([
-            f"whole arm ({len(self.model.joints)} joints), {s.payload_kg:g} kg at the gripper, winding limit "
-            f"{_limit_text(self.limits_c)}: {'FEASIBLE' if self.feasible else 'INFEASIBLE'} ({self.status})",
-            f"  {self.message}",
+            f"whole arm ({len(self.model.joints)} joints), {s.payload_kg:g} kg at the gripper: {self.message}",
             f"  task: payload at {np.round(p.payload_point_m, 3).tolist()} m (±{s.target_tolerance_m:g} m)",
             f"  naive posture: limiting joint {nv.limiting_joint}, hold {format_s(nv.hold_limit_s)} from idle",
             f"  {p.method} posture: limiting joint {p.limiting_joint}, hold {format_s(p.hold_limit_s)} from idle "
@@ -334,17 +353,21 @@ def plan_whole_arm(model: ActuatedArm | None = None, **options) -> WholeArmPlan:
     s = settings_from_mapping(WholeArmSettings, options, _SRC)
     model, naive, chosen, target, dt = prepare(s, model)
     hp = build_hold_problem(model, s, chosen.q_rad, target, dt)
-    result, summary = solve_hold(hp, s)
-    feasible = is_feasible(result)
+    outcome, summary = solve_hold(hp, s)
+    result, feasible = outcome.result, outcome.feasible
     arrival = result.xs[hp.hold_knot]
     ttl = time_to_limit_by_joint(model, model.static_current_a(chosen.q_rad), arrival[2 * model.nu:], hp.limits_c)
     binding, violated = tuple(binding_constraints(hp, result)), tuple(violated_constraints(hp, result))
-    if feasible:
+    cause = None
+    if outcome.verdict is None:
+        status = "failed"
+        message = f"no solve reached a verdict ({outcome.tried()}); nothing is known about this hold"
+    elif feasible:
         status, message = "feasible", f"holds {s.hold_s:g} s under {_limit_text(hp.limits_c)}"
     else:
-        status = "infeasible_hold"
-        message = (f"no feasible plan for the {s.hold_s:g} s hold ({result.status}: {result.message}); "
-                   f"violated: {', '.join(violated) or 'none'}")
+        status, cause = "infeasible_hold", cause_of(deciding_constraints(hp, result, violated=True))
+        message = (f"cannot hold {s.hold_s:g} s under {_limit_text(hp.limits_c)}"
+                   + (f"; {CAUSE_WORDS[cause]}" if cause else "") + f" (violated: {', '.join(violated) or 'none'})")
     log.info("whole arm %s: %s", model.joints, message)
     return WholeArmPlan(feasible, status, message, s, chosen, naive, hp.time_s, result.xs, result.us, dt, model,
-                        summary, binding, violated, ttl, hp.limits_c)
+                        summary, binding, violated, ttl, hp.limits_c, cause)

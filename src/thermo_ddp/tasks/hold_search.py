@@ -1,0 +1,126 @@
+"""The longest feasible hold of a lift in few complete solves.
+
+Each probe is a complete optimisation with a verdict (:mod:`thermo_ddp.tasks.attempts`). Where to probe
+comes first from the caller (``plan_lift``: the time to the limit holding at the goal from the start's
+temperatures, a little long), then from a thermal-only prediction (milliseconds): the longest hold whose
+winding stays under the limit when the last plan's currents of the lift, the hold and the lowering are
+replayed with the hold stretched or cut (what the optimiser does on the lift, the hold band and the lowering). The
+prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
+does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
+on the same side twice the probes gallop (steps doubling); bisection takes over after
+:data:`GUIDED_PROBES` probes. The default 40 kg searches take 3 solves (was 6 at 84 °C and 4 at 140 °C by
+galloping and bisection; benchmarks/README.md).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Callable, Mapping
+
+import numpy as np
+
+from ..solvers import SolverResult, WarmStart
+from .attempts import Outcome
+from .thermal_hold import thermal_trajectory, winding_indices
+
+log = logging.getLogger(__name__)
+GUIDED_PROBES = 5   # probes placed by the prediction (galloping when it misses twice); bisection after them
+
+
+@dataclasses.dataclass(frozen=True)
+class HoldSearch:
+    """The probes of :func:`longest_feasible_hold`: hold (knots) -> (problem, outcome)."""
+
+    knots: int          # the longest feasible hold in knots; -1 when not even touching the goal is feasible
+    probes: Mapping[int, tuple[object, Outcome]]
+    failed: int | None = None   # the hold (knots) whose solves reached no verdict (the search stopped there)
+
+    @property
+    def best(self) -> tuple[object, Outcome]:
+        """The failed probe, else the longest feasible one, else the shortest infeasible one."""
+        if self.failed is not None:
+            return self.probes[self.failed]
+        return self.probes[self.knots if self.knots >= 0 else min(self.probes)]
+
+    @property
+    def results(self) -> list[SolverResult]:
+        return [r for _, o in self.probes.values() for r in o.results]
+
+    @property
+    def solve_s(self) -> float:
+        return sum(r.solve_s for r in self.results)
+
+
+def _stretched(values: np.ndarray, first: int, hold: int, knots: int, held: np.ndarray) -> np.ndarray:
+    """Per-step ``values`` of a plan holding ``hold`` steps from step ``first``, with the hold made ``knots``
+    steps long (``held`` repeated), cut or padded with the last row to the same length."""
+    out = np.vstack([values[:first], np.tile(held, (knots, 1)), values[first + hold:]])
+    rows = values.shape[0]
+    return out[:rows] if out.shape[0] >= rows else np.vstack([out, np.tile(out[-1], (rows - out.shape[0], 1))])
+
+
+def _peak_winding(lp, current: np.ndarray, speed: np.ndarray) -> float:
+    temps = thermal_trajectory(lp.model, current, speed, lp.x0[2 * lp.model.nu:], lp.settings.dt_s)
+    return float(temps[:, winding_indices(lp.model)].max())
+
+
+def predicted_peak_winding_c(lp, plan: tuple[object, SolverResult], knots: int) -> float:
+    """The winding's peak replaying ``plan``'s currents (its problem and result) with a hold of ``knots``."""
+    current, speed, first, hold, held = _replay(lp, plan)
+    return _peak_winding(lp, _stretched(current, first, hold, knots, held),
+                         _stretched(speed, first, hold, knots, np.zeros_like(held)))
+
+
+def _replay(lp, plan):
+    """(current, speed, hold start, hold knots, held current) of ``plan``. The held current is the least that
+    holds the payload still inside the hold band (the optimiser's hold)."""
+    s = lp.settings
+    held = min((lp.model.static_current_a([q]) for q in (s.goal_rad - s.hold_tolerance_rad,
+                                                         s.goal_rad + s.hold_tolerance_rad)), key=lambda i: abs(i[0]))
+    src, result = plan
+    speed = result.xs[:-1, [lp.model.index(j, "v_rad_s") for j in lp.model.joints]]
+    return result.us, speed, src.hold_knots[0], src.hold_knots[1] - src.hold_knots[0], held
+
+
+def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
+    """The longest hold (knots, up to the requested one; -1: none) whose replayed currents keep the winding
+    under ``lp.settings.limit_c``: the currents of ``plan`` (its problem and result)."""
+    lo, hi = -1, lp.hold_knots[1] - lp.hold_knots[0] + 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if predicted_peak_winding_c(lp, plan, mid) <= lp.settings.limit_c else (lo, mid)
+    return lo
+
+
+def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int) -> HoldSearch:
+    """The longest hold, up to the requested one (the fixed horizon), with a feasible plan.
+
+    ``solve(problem, warm_start)`` gives a probe's :class:`Outcome`; the first probe holds ``first_knots``.
+    Every verdict is a complete optimisation, warm-started from the nearest solved probe's trajectories; a
+    probe without a verdict stops the search."""
+    probes: dict[int, tuple[object, Outcome]] = {}
+    top = lp.hold_knots[1] - lp.hold_knots[0]
+    lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
+    while hi - lo > 1:
+        knots = int(np.clip(guess, lo + 1, hi - 1)) if len(probes) < GUIDED_PROBES else (lo + hi) // 2
+        probe = lp.with_hold(knots * lp.settings.dt_s)
+        solved = [k for k, (_, o) in probes.items() if o.feasible] or list(probes)  # nearest feasible first
+        near = min(solved, key=lambda k: abs(k - knots)) if solved else None
+        warm = None if near is None else WarmStart(probes[near][1].result.xs, probes[near][1].result.us)
+        probes[knots] = (probe, solve(probe, warm))
+        outcome = probes[knots][1]
+        log.info("hold %.1f s: %s", probe.hold_s, outcome.verdict or "no verdict")
+        if outcome.verdict is None:
+            return HoldSearch(lo, probes, failed=knots)
+        lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
+        step = 2 * step if outcome.verdict == last and len(probes) > 2 else 1   # the same side again: gallop
+        last = outcome.verdict
+        predicted = predicted_hold_knots(lp, (probe, outcome.result))
+        if not outcome.feasible and predicted >= knots:
+            guess = 0  # the heat allows this hold, so a shorter one will not help: try touching the goal at once
+        else:
+            # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering
+            # still give way a little)
+            bias = 1 if knots - predicted >= 2 else 0
+            guess = max(predicted, lo + step) if outcome.feasible else min(predicted - bias, hi - step)
+    return HoldSearch(lo, probes)

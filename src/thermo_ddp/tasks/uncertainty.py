@@ -1,0 +1,265 @@
+"""A joint's thermal uncertainty set, its scenarios as models, and the worst motor of the set for a plan.
+
+- :class:`UncertaintySet`: the box of the uncertain values, by dotted path (``thermal.casing_ambient_k_per_w``,
+  ``motor.resistance_ohm``): every thermal capacity and resistance of the file's model, the winding
+  resistance and the drive's losses, each within +-``fraction`` of the file's value; or the intervals of
+  the file's ``[uncertainty]`` section (95 % intervals written by identify/diagnose).
+- :func:`scenario_step`: one scenario's step ``(x, u, p, theta) -> x_next`` of the elbow with the uncertain
+  values ``theta`` as a runtime input (the multi-model problem's dynamics); at the file's values it is the
+  model's own step.
+- :class:`WorstCase`: the replay of a plan (its current and motion) through the scenario model, exactly
+  as the planner's constraint sees it, and the motor of the set with the highest winding peak: projected
+  gradient ascent (L-BFGS-B) from the vertex the gradient at the file's values points to and from a few
+  more vertices. Every motor starts from given (measured) temperatures, or from its own equilibrium at rest.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import minimize
+
+from .._config import require
+from ..model.actuated import ActuatedArm
+from ..model.integrators import make_step
+from ..model.parameters import THERMAL_KEYS, JointParameters
+from ..model.thermal import joint_heat_rhs, network_from_parameters
+
+FRACTION_RANGE = "(0, 1)"
+DRIVE_LOSSES = ("drive_idle_w", "drive_loss_w_per_a2")
+WINDING_RESISTANCE = "motor.resistance_ohm"
+_SRC = "uncertainty"
+_STARTS = 3  # vertices the worst-case search starts from: the gradient's, its nearest neighbour, a random one
+
+
+def uncertain_keys(params: JointParameters) -> tuple[str, ...]:
+    """The values ``--uncertainty FRACTION`` varies: the thermal model's capacities and resistances, the drive's
+    losses (when not zero) and the winding resistance, by dotted path."""
+    th = params.thermal
+    keys = [k for k in THERMAL_KEYS[th.model] if k not in DRIVE_LOSSES]
+    keys += [k for k in DRIVE_LOSSES if th[k] != 0]
+    return tuple(f"thermal.{k}" for k in keys) + (WINDING_RESISTANCE,)
+
+
+def value_of(params: JointParameters, key: str) -> float:
+    return float(params.value(key))
+
+
+@dataclasses.dataclass(frozen=True)
+class UncertaintySet:
+    """The box ``low <= theta <= high`` of the values ``keys`` around the file's ``nominal``; ``label``
+    says where it comes from (``+-20 %`` or the file's ``[uncertainty]``)."""
+
+    keys: tuple[str, ...]
+    nominal: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    label: str
+
+    @classmethod
+    def from_fraction(cls, params: JointParameters, fraction: float) -> "UncertaintySet":
+        keys = uncertain_keys(params)
+        nominal = np.array([value_of(params, k) for k in keys])
+        return cls(keys, nominal, nominal * (1 - fraction), nominal * (1 + fraction), f"+-{100 * fraction:g} %")
+
+    @classmethod
+    def from_file(cls, params: JointParameters, path: str | Path) -> "UncertaintySet":
+        """The file's ``[uncertainty]`` intervals (dotted paths of the file's values; read and checked, each
+        containing the file's value, when the file was loaded)."""
+        intervals = params.scope.uncertainty
+        require(len(intervals) > 0, str(path), "[uncertainty]", "<missing>",
+                "no intervals: give --uncertainty FRACTION, or identify the motor to write them")
+        keys = tuple(intervals)
+        low, high = (np.array([intervals[k][i] for k in keys], float) for i in (0, 1))
+        nominal = np.array([value_of(params, k) for k in keys])
+        return cls(keys, nominal, low, high, "the file's [uncertainty]")
+
+    @property
+    def size(self) -> int:
+        return len(self.keys)
+
+    def theta(self, z) -> np.ndarray:
+        """The values at normalised coordinates ``z`` in [-1, 1]^d (the box's corners at +-1)."""
+        return 0.5 * (self.low + self.high) + 0.5 * (self.high - self.low) * np.asarray(z, float)
+
+    def z(self, theta) -> np.ndarray:
+        half = 0.5 * (self.high - self.low)
+        return np.divide(np.asarray(theta, float) - 0.5 * (self.low + self.high), half, out=np.zeros(self.size),
+                         where=half > 0)
+
+    def sample(self, rng: np.random.Generator, count: int) -> np.ndarray:
+        """``count`` motors drawn uniformly in the box, (count, d)."""
+        return self.low + (self.high - self.low) * rng.random((count, self.size))
+
+    def parameters(self, params: JointParameters, theta) -> JointParameters:
+        """The parameter file with the values ``theta`` (validated like a file)."""
+        values = dict(zip(self.keys, np.asarray(theta, float).tolist()))
+        return params.with_values(values).checked()
+
+    def to_dict(self) -> dict:
+        return {"set": self.label, "keys": list(self.keys), "low": self.low.tolist(), "high": self.high.tolist()}
+
+
+def check_fraction(fraction) -> float:
+    ok = isinstance(fraction, (int, float, np.floating)) and not isinstance(fraction, bool) and 0 < fraction < 1
+    require(ok, "plan_lift", "uncertainty", fraction, "expected a fraction 0 < FRACTION < 1 (0.2: every value "
+            "within +-20 %)")
+    return float(fraction)
+
+
+# --------------------------------------------------------------------------------------------
+# The scenario model: the elbow with theta as a runtime input
+# --------------------------------------------------------------------------------------------
+def _scenario_parameters(params: JointParameters, keys, theta):
+    """The joint's motor and thermal network with the values ``keys`` replaced by the symbols ``theta``."""
+    motor, values = params.motor, dict(params.thermal.values)
+    for k, key in enumerate(keys):
+        section, name = key.split(".", 1)
+        if section == "motor":
+            motor = dataclasses.replace(motor, **{name: theta[k]})
+        else:
+            values[name] = theta[k]
+    return motor, network_from_parameters(dataclasses.replace(params.thermal, values=values))
+
+
+def scenario_step(model: ActuatedArm, keys, dt_s: float, integrator: str, n_params: int, env_of) -> ca.Function:
+    """``step(x, u, p, theta) -> x_next`` of the (one-joint) model: its mechanics (runtime payload) and its
+    thermal network with the values ``keys`` read from ``theta``; ``env_of(p)`` gives [ambient_c, payload_kg]
+    from the task's per-knot parameters ``p``."""
+    joint, n = model.joints[0], model.nu
+    x, u, env, theta = ca.SX.sym("x", model.nx), ca.SX.sym("u", n), ca.SX.sym("env", 2), ca.SX.sym("theta", len(keys))
+    motor, network = _scenario_parameters(model.params[joint], keys, theta)
+    mech = model.runtime_payload_functions[0](x, u, env)[:2 * n]
+    heat = joint_heat_rhs(network, motor, x[2 * n:], u[0], x[n], env[0])
+    ode = ca.Function("scenario_ode", [x, u, ca.vertcat(env, theta)], [ca.vertcat(mech, heat)],
+                      ["x", "u", "env_theta"], ["xdot"])
+    step = make_step(ode, dt_s, integrator)
+    p = ca.SX.sym("p", n_params)
+    return ca.Function("scenario_step", [x, u, p, theta], [step(x, u, ca.vertcat(env_of(p), theta))],
+                       ["x", "u", "p", "theta"], ["x_next"])
+
+
+def idle_temperatures(model: ActuatedArm, keys) -> ca.Function:
+    """``idle(theta, ambient_c) -> temperatures_c`` at rest (no current, no motion) of scenario ``theta``."""
+    joint = model.joints[0]
+    theta, amb = ca.SX.sym("theta", len(keys)), ca.SX.sym("ambient_c")
+    motor, network = _scenario_parameters(model.params[joint], keys, theta)
+    temps = ca.SX.sym("t", len(network.nodes))
+    rhs = joint_heat_rhs(network, motor, temps, 0.0, 0.0, amb)
+    a, b = ca.jacobian(rhs, temps), ca.substitute(rhs, temps, ca.DM.zeros(temps.numel()))
+    return ca.Function("idle_temperatures", [theta, amb], [ca.solve(a, -b)], ["theta", "ambient_c"], ["temperatures_c"])
+
+
+# --------------------------------------------------------------------------------------------
+# The worst motor of the set for a plan
+# --------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class WorstMotor:
+    """The motor of the set with the highest winding peak for a plan: its values, peak, where on the
+    box it sits, and whether the gradient there certifies a local maximum (KKT of the box)."""
+
+    theta: np.ndarray
+    peak_c: float
+    z: np.ndarray
+    certified: bool
+    evaluations: int
+
+
+class WorstCase:
+    """Replays of one plan's current and motion (``us`` (N, 1), shared states ``qv`` (N+1, 2), per-knot
+    parameters ``params`` (N+1, np)) through every motor of ``uset``: winding trajectories and their
+    gradients with respect to theta, and the worst motor (:meth:`search`)."""
+
+    def __init__(self, model: ActuatedArm, uset: UncertaintySet, step: ca.Function, winding_index: int,
+                 start_c=None):
+        self.model, self.uset, self.step, self.iw = model, uset, step, winding_index
+        self.idle = idle_temperatures(model, uset.keys)
+        self.start_c = None if start_c is None else np.asarray(start_c, float)
+        self._replays: dict[int, ca.Function] = {}
+
+    def initial_c(self, theta, ambient_c: float) -> np.ndarray:
+        """Motor ``theta``'s temperatures at the start: ``start_c`` (measured), or its own rest."""
+        return np.array(self.idle(theta, ambient_c)).ravel() if self.start_c is None else self.start_c
+
+    def _replay(self, knots: int) -> ca.Function:
+        """``replay(theta, qv, u, p, ambient_c) -> (winding_c (N+1,), peak_c, d peak / d theta)``."""
+        if knots not in self._replays:
+            self._replays[knots] = self._build_replay(knots)
+        return self._replays[knots]
+
+    def _build_replay(self, knots: int) -> ca.Function:
+        n = self.model.nu
+        t = ca.SX.sym("t", self.model.nx - 2 * n)
+        qv, u, p, theta = (ca.SX.sym(k, s) for k, s in (("qv", 2 * n), ("u", n), ("p", self.step.size1_in(2)),
+                                                         ("theta", self.uset.size)))
+        thermal = ca.Function("thermal_next", [t, qv, u, p, theta], [self.step(ca.vertcat(qv, t), u, p, theta)[2 * n:]])
+        roll = thermal.mapaccum(knots)
+        th, amb = ca.MX.sym("theta", self.uset.size), ca.MX.sym("ambient_c")
+        QV, U, P = ca.MX.sym("qv", 2 * n, knots), ca.MX.sym("u", n, knots), ca.MX.sym("p", p.numel(), knots)
+        t0 = self.idle(th, amb) if self.start_c is None else ca.DM(self.start_c)
+        temps = ca.horzcat(t0, roll(t0, QV, U, P, ca.repmat(th, 1, knots)))
+        w = temps[self.iw - 2 * n, :].T
+        peak = ca.mmax(w)  # its reverse-mode gradient is the gradient of the winding at the peak's knot
+        return ca.Function("replay", [th, QV, U, P, amb], [w, peak, ca.gradient(peak, th)],
+                           ["theta", "qv", "u", "p", "ambient_c"], ["winding_c", "peak_c", "gradient"])
+
+    def replay(self, theta, qv, us, params, ambient_c: float) -> np.ndarray:
+        """Winding (N+1,) of motor ``theta`` under the plan."""
+        return np.array(self._replay(us.shape[0])(theta, qv[:-1].T, us.T, params[:-1].T, ambient_c)[0]).ravel()
+
+    def peak(self, theta, qv, us, params, ambient_c: float) -> tuple[float, np.ndarray]:
+        """The winding's peak of motor ``theta`` under the plan and its gradient with respect to theta."""
+        _, peak, grad = self._replay(us.shape[0])(theta, qv[:-1].T, us.T, params[:-1].T, ambient_c)
+        return float(peak), np.array(grad).ravel()
+
+    def search(self, qv, us, params, ambient_c: float, rng_seed: int = 0) -> WorstMotor:
+        """The motor with the highest winding peak: L-BFGS-B on the box (normalised) from the vertex the
+        gradient at the file's values points to, its neighbour with the smallest gradient component
+        flipped, and random vertices; the best end point, certified when its gradient points out of the box
+        at every bound it sits on and vanishes elsewhere."""
+        calls = [0]
+
+        def negative_peak(z):
+            calls[0] += 1
+            peak, grad = self.peak(self.uset.theta(z), qv, us, params, ambient_c)
+            return -peak, -grad * 0.5 * (self.uset.high - self.uset.low)
+
+        z0 = self.uset.z(self.uset.nominal)
+        g0 = -negative_peak(z0)[1]
+        first = np.where(g0 >= 0, 1.0, -1.0)
+        flipped = first.copy()
+        flipped[np.argmin(np.abs(g0))] *= -1
+        rng = np.random.default_rng(rng_seed)
+        starts = [first, flipped, *rng.choice([-1.0, 1.0], size=(_STARTS - 2, self.uset.size))]  # several vertices
+        best = None
+        for z in starts:
+            res = minimize(negative_peak, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.uset.size,
+                           options={"maxiter": 30})
+            if best is None or res.fun < best.fun:
+                best = res
+        z = np.clip(best.x, -1, 1)
+        grad = -negative_peak(z)[1]
+        scale = max(1e-9, np.abs(grad).max())
+        at_bound = np.abs(np.abs(z) - 1) < 1e-6
+        certified = bool(np.all(np.where(at_bound, grad * z >= -1e-6 * scale, np.abs(grad) <= 1e-3 * scale)))
+        return WorstMotor(self.uset.theta(z), float(-best.fun), z, certified, calls[0])
+
+    def hottest_idle_c(self, ambient_c: float) -> tuple[float, np.ndarray]:
+        """The highest idle winding temperature of the set and its motor (the idle network is linear in
+        the heat, so the search is the same ascent on the box)."""
+        iw = self.iw - 2 * self.model.nu
+        th = ca.SX.sym("theta", self.uset.size)
+        w = self.idle(th, ambient_c)[iw]
+        f = ca.Function("idle_winding", [th], [w, ca.gradient(w, th)])
+        half = 0.5 * (self.uset.high - self.uset.low)
+
+        def negative(z):
+            value, grad = f(self.uset.theta(z))
+            return -float(value), -np.array(grad).ravel() * half
+
+        starts = [np.where(-negative(self.uset.z(self.uset.nominal))[1] >= 0, 1.0, -1.0), self.uset.z(self.uset.nominal)]
+        best = min((minimize(negative, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.uset.size)
+                    for z in starts), key=lambda r: r.fun)
+        return -float(best.fun), self.uset.theta(best.x)
