@@ -21,7 +21,8 @@ import numpy as np
 
 from ..solvers import SolverResult, WarmStart
 from .attempts import Outcome
-from .thermal_hold import thermal_trajectory, winding_indices
+from .thermal_hold import thermal_trajectory, time_to_limit_by_joint, winding_indices
+from .verdicts import binding_constraints, cause_class, deciding_constraints
 
 log = logging.getLogger(__name__)
 GUIDED_PROBES = 5   # probes placed by the prediction (galloping when it misses twice); bisection after them
@@ -62,6 +63,27 @@ def _stretched(values: np.ndarray, first: int, hold: int, knots: int, held: np.n
 def _peak_winding(lp, current: np.ndarray, speed: np.ndarray) -> float:
     temps = thermal_trajectory(lp.model, current, speed, lp.x0[2 * lp.model.nu:], lp.settings.dt_s)
     return float(temps[:, winding_indices(lp.model)].max())
+
+
+def _thermal(probe, result: SolverResult) -> bool:
+    """A thermal constraint among those that decide an infeasible probe (violated, or at its bound)."""
+    names = deciding_constraints(probe, result, violated=True)
+    names += [k for k in binding_constraints(probe, result) if k not in names]
+    return any(cause_class(k) == "thermal" for k in names)
+
+
+def _at_limit(lp, result: SolverResult, margin_c: float = 0.5) -> bool:
+    return float(result.xs[:, [lp.model.index(j, "winding_c") for j in lp.model.joints]].max()) >= (
+        lp.settings.limit_c - margin_c)
+
+
+def _arrival_knots(lp, probe, result: SolverResult) -> int:
+    """Knots of holding the least current of the band, from ``result``'s state on arrival, until the limit."""
+    held, joint = _replay(lp, (probe, result))[4], lp.model.joints[0]
+    horizon = (lp.hold_knots[1] - lp.hold_knots[0] + 1) * lp.settings.dt_s
+    ttl = time_to_limit_by_joint(lp.model, held, result.xs[probe.hold_knots[0], 2 * lp.model.nu:],
+                                 {joint: lp.settings.limit_c}, horizon, lp.settings.dt_s)[joint]
+    return int(min(ttl, horizon) / lp.settings.dt_s)
 
 
 def predicted_peak_winding_c(lp, plan: tuple[object, SolverResult], knots: int) -> float:
@@ -113,11 +135,16 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         if outcome.verdict is None:
             return HoldSearch(lo, probes, failed=knots)
         lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
-        step = 2 * step if outcome.verdict == last and len(probes) > 2 else 1   # the same side again: gallop
+        same_side = outcome.verdict == last and (outcome.feasible or len(probes) > 2)
+        step = 2 * step if same_side else 1   # the same side again: gallop
         last = outcome.verdict
         predicted = predicted_hold_knots(lp, (probe, outcome.result))
-        if not outcome.feasible and predicted >= knots:
-            guess = 0  # the heat allows this hold, so a shorter one will not help: try touching the goal at once
+        if outcome.feasible and not _at_limit(lp, outcome.result):
+            # a plan short of the limit heats more on its lift and lowering than one at the boundary, so its replay
+            # is short: take the time to the limit from its arrival (long: the lowering's heat aside) when longer
+            predicted = max(predicted, _arrival_knots(lp, probe, outcome.result))
+        if not outcome.feasible and predicted >= knots and not _thermal(probe, outcome.result):
+            guess = 0  # the heat neither decides nor binds: a shorter hold will not help, try touching the goal
         else:
             # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering
             # still give way a little)
