@@ -85,3 +85,25 @@ def test_warm_start_shift_keeps_the_horizon_length():
         warm = WarmStart.from_result(res, shift=shift)
         assert warm.xs.shape == (4, 1) and warm.us.shape == (3, 1)
         assert warm.xs[-1, 0] == 3.0 and warm.xs[0, 0] == min(shift, 3)
+
+
+def test_callback_sees_every_iteration_and_may_stop_the_solve():
+    """The loop's hook (crocoddyl's CallbackAbstract): one read-only view per accepted iteration, equal to the
+    history; returning True stops the solve, which is then failed with reason "stopped", never a verdict."""
+    import dataclasses
+
+    from thermo_ddp.solvers.ddp import IterationView
+    from thermo_ddp.testing.thermal_pendulum import thermal_pendulum, x0_of
+
+    views, x0, goal = [], x0_of(), np.full((101, 1), 2.0)
+    solver = DDPSolver(thermal_pendulum(t_max=50.0), {"backend": "casadi"})
+    full = solver.solve(x0, goal, callback=views.append)
+    assert full.success and len(views) == full.iterations >= 2
+    assert all(isinstance(v, IterationView) for v in views)
+    assert [v.cost for v in views] == full.history["cost"][: len(views)]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        views[0].cost = 0.0
+    stopped = solver.solve(x0, goal, callback=lambda view: view.iteration >= 1)
+    assert stopped.status == "failed" and stopped.reason == "stopped" and stopped.iterations == 1
+    with pytest.raises(InputError, match="callback"):
+        solver.solve(x0, goal, callback=3)

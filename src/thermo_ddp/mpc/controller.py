@@ -251,7 +251,7 @@ class RecedingHorizonController:
         warm = WarmStart.from_result(self.plan, shift=min(shift, self.lp.problem.horizon))
         multipliers = dict(warm.multipliers)
         if "penalty" in multipliers:
-            multipliers["penalty"] = min(float(multipliers["penalty"]), self.settings.controller.warm_penalty_max)
+            multipliers["penalty"] = np.minimum(multipliers["penalty"], self.settings.controller.warm_penalty_max)
         return WarmStart(warm.xs, warm.us, multipliers)
 
     def _shorten(self) -> bool:

@@ -2,6 +2,7 @@
 
 Every backend offers the same calls on whole trajectories, as C-contiguous numpy arrays with one
 row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps):
+(rho: the penalties of the rows of g and then of g_N, one vector)
   backward(X, U, P, Lam, LamN, C, rho, reg) -> (policy (N, n_policy), summary [d1, d2, stat, pivot],
                                                 values (N+1, n_value))
   evaluate_backward(X, U, P, Lam, LamN, rho, reg) -> ((J, G, GN, C), backward's outputs): both in
@@ -31,6 +32,7 @@ import numpy as np
 
 from .. import codegen
 from . import _pass_cache
+from ._layout import Layout
 from ._riccati import NumpyOps, SymOps, backward_step, gradient_step, knot_model
 
 log = logging.getLogger(__name__)
@@ -40,26 +42,6 @@ log = logging.getLogger(__name__)
 _CSE = {"cse": True}
 
 
-class Layout:
-    """Packing of per-knot values: value = [a; b; vec(Vxx)], policy = [k; vec(K); pivot; d1; d2; stat]."""
-
-    def __init__(self, nx, nu):
-        self.nx, self.nu = nx, nu
-        self.n_value = 2 * nx + nx * nx
-        self.n_policy = nu + nu * nx + 4
-
-    def gains(self, policy: np.ndarray):
-        """k (N, nu) and K (N, nu, nx) from a policy array (casadi vec is column-major)."""
-        nx, nu = self.nx, self.nu
-        k = policy[:, :nu].copy()
-        K = policy[:, nu: nu + nu * nx].reshape(-1, nx, nu).transpose(0, 2, 1).copy()
-        return k, K
-
-    def costates(self, values: np.ndarray) -> np.ndarray:
-        """Value gradients Vx = a + b at every knot, (N+1, nx)."""
-        return values[:, : self.nx] + values[:, self.nx: 2 * self.nx]
-
-
 def knot_functions(problem, settings, layout, compiled: bool = False):
     """The per-knot CasADi functions (C names ``ddp_*``, all outputs dense) and the symbolic local model;
     ``compiled``: without the composed backward step (the driver composes it; saves seconds for big models)."""
@@ -67,7 +49,7 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     sym = F.symbolic
     x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
     lam, lamN = sym.sym("lam", problem.n_constraints), sym.sym("lamN", problem.n_terminal_constraints)
-    rho = sym.sym("rho")
+    rho = sym.sym("rho", problem.n_constraints)  # a penalty per row of g (of g_N: ``rhoN`` of the terminal knot)
     model = knot_model(F, x, u, p, lam, rho, settings.full_second_order)
     second = model.pop("second_order_sym", None)
     knots = {"model": model, "second": second, "syms": (x, u, p, lam, lamN, rho)}
@@ -92,10 +74,9 @@ def _fused_knots(problem, settings, layout, knots):
     reg, c, S, xn = sym.sym("reg"), sym.sym("c", nx), sym.sym("S", layout.n_value), sym.sym("x_next", nx)
     v_sym, hxx, huu, hux = knots["second"]
     model = {**knots["model"], "second_order": lambda v: tuple(ca.substitute(h, v_sym, v) for h in (hxx, huu, hux))}
-    st = backward_step(SymOps, model, S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx), c, u,
-                       ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg, settings.box_iterations, problem.has_box)
-    out = [ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"])),
-           ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])]
+    st = backward_step(SymOps, model, *layout.unpack_value(S), c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
+                       settings.box_iterations, problem.has_box)
+    out = [layout.pack_value(st["a"], st["b"], st["Vxx"]), layout.pack_policy(st)]
     step = _function("ddp_fused_step", [S, x, u, p, lam, c, rho, reg], out,
                      ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"])
     cost, g, gap = knots["eval"](x, u, p, xn)
@@ -121,6 +102,12 @@ FUSED = ("ddp_fused_step", "ddp_fused_eval_step")
 def _function(name, inputs, outputs, names_in, names_out, cse=True):
     """A knot function with dense outputs (the driver writes whole rows), shared subexpressions by default."""
     return ca.Function(name, inputs, [ca.densify(o) for o in outputs], names_in, names_out, _CSE if cse else {})
+
+
+def penalties(problem, rho) -> np.ndarray:
+    """The penalty vector of the passes (rows of g, then of g_N) from one value per row or one for all."""
+    n = problem.n_constraints + problem.n_terminal_constraints
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(rho, dtype=float).ravel(), (n,)))
 
 
 def _local_model_knot(problem, knots):
@@ -169,11 +156,9 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         columns = np.concatenate([cols for _, cols in chunks])
         H = ca.reshape(hess, nz, nz)[:, np.argsort(columns).tolist()]  # chunk order -> column order
         model["second_order"] = lambda v: (H[:nx, :nx], H[nx:, nx:], H[nx:, :nx])
-    a, b, Vxx = S[:nx], S[nx: 2 * nx], ca.reshape(S[2 * nx:], nx, nx)
-    st = backward_step(SymOps, model, a, b, Vxx, c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
+    st = backward_step(SymOps, model, *layout.unpack_value(S), c, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), reg,
                        settings.box_iterations, problem.has_box)
-    S_prev = ca.vertcat(st["a"], st["b"], ca.vec(st["Vxx"]))
-    policy = ca.vertcat(st["k"], ca.vec(st["K"]), st["pivot"], st["d1"], st["d2"], st["stationarity"])
+    S_prev, policy = layout.pack_value(st["a"], st["b"], st["Vxx"]), layout.pack_policy(st)
     back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
                      ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
@@ -181,9 +166,10 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
-    term = knot_model(F, x, None, p, lamN, rho, settings.full_second_order, terminal=True)
-    S_N = ca.vertcat(term["lx"], ca.DM.zeros(nx), ca.vec(term["lxx"]))
-    terminal = _function("ddp_back_terminal", [x, p, lamN, rho], [S_N], ["x", "p", "lamN", "rho"], ["S"])
+    rhoN = F.symbolic.sym("rhoN", problem.n_terminal_constraints)
+    term = knot_model(F, x, None, p, lamN, rhoN, settings.full_second_order, terminal=True)
+    S_N = layout.pack_value(term["lx"], ca.DM.zeros(nx), term["lxx"])
+    terminal = _function("ddp_back_terminal", [x, p, lamN, rhoN], [S_N], ["x", "p", "lamN", "rhoN"], ["S"])
     return back, composed, terminal
 
 
@@ -194,7 +180,8 @@ def _hessian_chunks(problem, layout, x, u, p):
     for the 7-joint arm (1.10e6 -> 1.12e6 without) and costs 11 s."""
     F, nx = problem.functions, problem.nx
     S, c = F.symbolic.sym("S", layout.n_value), F.symbolic.sym("c", nx)
-    v = S[:nx] + (S[nx: 2 * nx] + ca.reshape(S[2 * nx:], nx, nx) @ c)  # as backward_step: a + (b + Vxx c)
+    a, b, Vxx = layout.unpack_value(S)
+    v = a + (b + Vxx @ c)  # as backward_step
     z = ca.vertcat(x, u)
     grad = ca.gradient(ca.dot(v, F.step(x, u, p)), z)
     n_chunks = max(1, min(z.numel(), round(z.numel() * ca.n_nodes(grad) / HESSIAN_CHUNK_NODES)))
@@ -213,7 +200,7 @@ def _gradient_knot(problem, layout, knots, model_in, compiled):
     nx, nu = problem.nx, problem.nu
     x, u, p, lam, _, rho = knots["syms"]
     a, pol = problem.functions.symbolic.sym("a", nx), problem.functions.symbolic.sym("policy", layout.n_policy)
-    K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
+    K = layout.feedback(pol)
     a_prev, stat = gradient_step(SymOps, model_in[1], a, K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub),
                                  problem.has_box)
     core = _function("ddp_grad_knot", [a, model_in[0], u, pol], [a_prev, stat], ["a", "model", "u", "policy"],
@@ -230,7 +217,7 @@ def _forward_knot(problem, layout, x, p):
     sym = F.symbolic
     xr, ur, alpha, c = sym.sym("x_ref", nx), sym.sym("u_ref", nu), sym.sym("alpha"), sym.sym("c", nx)
     pol = sym.sym("policy", layout.n_policy)
-    K = ca.reshape(pol[nu: nu + nu * nx], nu, nx)
+    K = layout.feedback(pol)
     u_new = ur + alpha * pol[:nu] + K @ (x - xr)
     if problem.has_box:
         u_new = ca.fmin(ca.fmax(u_new, ca.DM(problem.u_lb)), ca.DM(problem.u_ub))
@@ -262,14 +249,15 @@ def build_passes(problem, knots, layout):
     ng, ngN = problem.n_constraints, problem.n_terminal_constraints
     X, U, P = ca.MX.sym("X", nx, N + 1), ca.MX.sym("U", problem.nu, N), ca.MX.sym("P", n_p, N + 1)
     Lam, LamN, C = ca.MX.sym("Lam", ng, N), ca.MX.sym("LamN", ngN), ca.MX.sym("C", nx, N)
-    rho, reg, alpha = ca.MX.sym("rho"), ca.MX.sym("reg"), ca.MX.sym("alpha")
+    rho, reg, alpha = ca.MX.sym("rho", ng + ngN), ca.MX.sym("reg"), ca.MX.sym("alpha")
+    rho_g, rho_N = rho[:ng], rho[ng:]
     Pol = ca.MX.sym("policy", layout.n_policy, N)
 
     def sweep(gaps):
-        S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)
+        S_N = knots["terminal"](X[:, N], P[:, N], LamN, rho_N)
         S_rev, pol_rev = knots["back"].mapaccum("ddp_back_acc", N)(
             S_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), _reverse(gaps, N),
-            rho, reg)
+            rho_g, reg)
         return _backward_outputs(layout, S_rev, pol_rev, S_N)
 
     cost, G, gaps = knots["eval"].map(N)(X[:, :N], U, P[:, :N], X[:, 1:])
@@ -282,9 +270,9 @@ def build_passes(problem, knots, layout):
         ["X", "U", "P", "Lam", "LamN", "rho", "reg"], ["policy", "summary", "values", "J", "G", "GN", "C"])
     evaluate = ca.Function("ddp_evaluate", [X, U, P], evaluation, ["X", "U", "P"], ["J", "G", "GN", "C"])
 
-    a_N = knots["terminal"](X[:, N], P[:, N], LamN, rho)[:nx]
+    a_N = knots["terminal"](X[:, N], P[:, N], LamN, rho_N)[:nx]
     a_rev, stat = knots["grad"].mapaccum("ddp_grad_acc", N)(
-        a_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), rho, _reverse(Pol, N))
+        a_N, _reverse(X[:, :N], N), _reverse(U, N), _reverse(P[:, :N], N), _reverse(Lam, N), rho_g, _reverse(Pol, N))
     gradient = ca.Function("ddp_gradient", [X, U, P, Lam, LamN, Pol, rho],
                            [ca.mmax(stat), ca.horzcat(_reverse(a_rev, N), a_N)],
                            ["X", "U", "P", "Lam", "LamN", "policy", "rho"], ["stat", "costates"])
@@ -302,9 +290,9 @@ def _backward_outputs(layout, S_rev, pol_rev, S_N):
     """policy (knot order), summary [sum d1, sum d2, max stationarity, min pivot] and values."""
     N = pol_rev.size2()
     policy = _reverse(pol_rev, N)
-    o = layout.nu + layout.nu * layout.nx
-    summary = ca.vertcat(ca.sum2(policy[o + 1, :]), ca.sum2(policy[o + 2, :]),
-                         ca.mmax(policy[o + 3, :]), ca.mmin(policy[o, :]))
+    column = layout.column
+    summary = ca.vertcat(ca.sum2(policy[column("d1"), :]), ca.sum2(policy[column("d2"), :]),
+                         ca.mmax(policy[column("stationarity"), :]), ca.mmin(policy[column("pivot"), :]))
     return [policy, summary, ca.horzcat(_reverse(S_rev, N), S_N)]
 
 
@@ -335,19 +323,21 @@ class CasadiBackend:
     name = "casadi"
 
     def __init__(self, problem, settings, layout, knots=None):
+        self.problem = problem
         knots = knots or knot_functions(problem, settings, layout)
         self._f = {name: _BufferCall(f) for name, f in build_passes(problem, knots, layout).items()}
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, rho, reg)
+        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, penalties(self.problem, rho), reg)
         return policy, summary.ravel(), values
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        policy, summary, values, J, G, GN, C = self._f["evaluate_backward"](X, U, P, Lam, LamN, rho, reg)
+        policy, summary, values, J, G, GN, C = self._f["evaluate_backward"](X, U, P, Lam, LamN,
+                                                                            penalties(self.problem, rho), reg)
         return (float(J[0, 0]), G, GN.ravel(), C), (policy, summary.ravel(), values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, rho)
+        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, penalties(self.problem, rho))
         return float(stat[0, 0]), costates
 
     def forward(self, X, U, P, policy, C, alpha):
@@ -401,13 +391,15 @@ class CompiledBackend:
 
     name = "codegen"
 
-    def __init__(self, problem, library: ctypes.CDLL):
-        self._lib = library
+    def __init__(self, problem, library: ctypes.CDLL, layout: Layout):
+        self._lib, self.problem = library, problem
         _bind(library)
         nx, nu = problem.nx, problem.nu
         self._dims = {"x": nx, "u": nu, "p": problem.n_params, "g": problem.n_constraints,
-                      "gN": problem.n_terminal_constraints, "policy": nu + nu * nx + 4, "value": 2 * nx + nx * nx}
-        self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"])
+                      "gN": problem.n_terminal_constraints, "policy": layout.n_policy, "value": layout.n_value,
+                      "rho": problem.n_constraints + problem.n_terminal_constraints}
+        self._work = library.ddp_work_new(nx, nu, self._dims["p"], self._dims["g"], self._dims["gN"],
+                                          *layout.c_sizes())
         if not self._work:
             raise MemoryError("no memory for the DDP work arrays")
         weakref.finalize(self, library.ddp_work_free, self._work)
@@ -434,19 +426,19 @@ class CompiledBackend:
         return results
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         return tuple(self._call("ddp_backward", N, _knots(N, X, U, P, Lam, LamN) + [(C, N, "x"), rho, reg],
                                 [(N, "policy"), (0, 4), (N + 1, "value")]))
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         policy, summary, values, J, G, GN, C = self._call(
             "ddp_evaluate_backward", N, _knots(N, X, U, P, Lam, LamN) + [rho, reg],
             [(N, "policy"), (0, 4), (N + 1, "value"), (0, 1), (N, "g"), (0, "gN"), (N, "x")])
         return (float(J[0]), G, GN, C), (policy, summary, values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        N = len(U)
+        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
         stat, costates = self._call("ddp_gradient", N, _knots(N, X, U, P, Lam, LamN) + [(policy, N, "policy"), rho],
                                     [(0, 1), (N + 1, "x")])
         return float(stat[0]), costates
@@ -475,9 +467,9 @@ def _bind(library: ctypes.CDLL) -> None:
         return
     ptr, dbl = ctypes.c_void_p, ctypes.c_double
     library.ddp_work_new.restype = ptr
-    library.ddp_work_new.argtypes = [ctypes.c_int] * 5
+    library.ddp_work_new.argtypes = [ctypes.c_int] * 8
     library.ddp_work_free.argtypes = [ptr]
-    counts = {"ddp_backward": (6, 2, 3), "ddp_evaluate_backward": (5, 2, 7), "ddp_gradient": (6, 1, 2),
+    counts = {"ddp_backward": (7, 1, 3), "ddp_evaluate_backward": (6, 1, 7), "ddp_gradient": (7, 0, 2),
               "ddp_forward": (5, 1, 5), "ddp_evaluate": (3, 0, 4)}  # input arrays, doubles, output arrays
     for name, (arrays, doubles, outputs) in counts.items():
         fn = getattr(library, name)
@@ -512,10 +504,11 @@ class NumpyBackend:
     def _knot_data(self, X, U, P, Lam, LamN, rho):
         """Per-knot derivatives (name -> (N, ...) arrays) and the terminal value S_N (arguments transposed)."""
         N = self.problem.horizon
-        mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho)]
+        ng, rho = self.problem.n_constraints, penalties(self.problem, rho)
+        mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho[:ng])]
         data = {n: m.T if n in ("lx", "lu") else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
                 for m, s, n in zip(mats, self._shapes, self._names)}
-        return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho)).ravel()
+        return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho[ng:])).ravel()
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
         evaluation = self.evaluate(X, U, P)
@@ -529,7 +522,7 @@ class NumpyBackend:
         costates[N] = a = S[:nx]
         stat = 0.0
         for t in reversed(range(N)):
-            K = policy[t, lay.nu: lay.nu + lay.nu * nx].reshape(nx, lay.nu).T
+            K = lay.feedback(policy[t])
             a, st = gradient_step(NumpyOps, {n: d[t] for n, d in data.items()}, a, K, U[:, t], pr.u_lb, pr.u_ub,
                                   pr.has_box)
             costates[t], stat = a, max(stat, st)
@@ -550,14 +543,14 @@ class NumpyBackend:
             st = backward_step(NumpyOps, model, a, b, Vxx, C[:, t], U[:, t], pr.u_lb, pr.u_ub, reg,
                                self.settings.box_iterations, pr.has_box)
             a, b, Vxx = st["a"], st["b"], st["Vxx"]
-            values[:, t] = np.concatenate([a, b, Vxx.T.ravel()])
-            policy[:, t] = np.concatenate([st["k"], st["K"].T.ravel(),
-                                           [st["pivot"], st["d1"], st["d2"], st["stationarity"]]])
+            values[:, t] = lay.pack_value(a, b, Vxx)
+            policy[:, t] = lay.pack_policy(st)
             if st["pivot"] <= 0:
-                policy[lay.nu + lay.nu * nx, :t] = -1.0
+                policy[lay.pivot, :t] = -1.0
                 break
-        o = lay.nu + lay.nu * nx
-        summary = np.array([policy[o + 1].sum(), policy[o + 2].sum(), policy[o + 3].max(), policy[o].min()])
+        col = lay.column
+        summary = np.array([policy[col("d1")].sum(), policy[col("d2")].sum(), policy[col("stationarity")].max(),
+                            policy[col("pivot")].min()])
         return policy.T.copy(), summary, values.T.copy()
 
     def _second_order(self, x, u, p):
@@ -590,5 +583,5 @@ def make_backend(problem, settings, layout):
     if settings.backend == "codegen":
         library = compiled_library(problem, settings, layout)
         if library is not None:
-            return CompiledBackend(problem, library)
+            return CompiledBackend(problem, library, layout)
     return CasadiBackend(problem, settings, layout)

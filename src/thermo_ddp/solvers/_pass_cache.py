@@ -36,7 +36,7 @@ def driver_source() -> str:
 @functools.lru_cache(maxsize=1)
 def _sources() -> bytes:
     here = Path(__file__).parent
-    files = [here / "_backends.py", here / "_riccati.py", here / "_pass_cache.py", Path(ocp.__file__),
+    files = [here / "_backends.py", here / "_layout.py", here / "_riccati.py", here / "_pass_cache.py", Path(ocp.__file__),
              Path(codegen.__file__)]
     return b"".join(f.read_bytes() for f in files) + driver_source().encode()
 

@@ -8,10 +8,14 @@ and gaps closed by a fraction alpha, the quadratic model of the cost change is e
 alpha*d1 + 0.5*alpha^2*d2 (for a linear-quadratic problem), with
 d1 = sum a'c + Qu0'k and d2 = sum 2b'c + c'Vxx c + 2 (B'(b + Vxx c))'k + k'Quu k.
 
-Control bounds: box-QP per knot by projected Newton (Bertsekas 1982; as in Box-DDP, Tassa,
-Mansard, Todorov, ICRA 2014): clip the unconstrained Newton step, then ``box_iterations``
-Newton steps on the free set; feedback rows of clamped controls are zero.
-Exact for one control in a single pass.
+Control bounds: box-QP per knot, min 0.5 du'H du + g'du on lo <= du <= hi, by projected Newton
+(Bertsekas 1982, "Projected Newton methods for optimization problems with simple constraints"; as in
+Box-DDP, Tassa, Mansard, Todorov, ICRA 2014): from the clipped unconstrained Newton step, up to
+``box_iterations`` steps, each a Newton step on the free set (controls not held at a bound by their
+gradient) searched along the projection arc clip(du + alpha d) with the Armijo test of Bertsekas
+(alpha = 1, 1/2, ..., 1/2^(BOX_HALVINGS-1): the largest that passes). A step from a point that satisfies the
+QP's own KKT conditions is zero, so the iteration stops there; one control is exact after the clip alone.
+Feedback rows of clamped controls are zero.
 """
 from __future__ import annotations
 
@@ -19,6 +23,8 @@ import casadi as ca
 import numpy as np
 
 EPS_BOUND = 1e-12
+BOX_HALVINGS = 4   # step lengths tried along the projection arc per projected-Newton step
+BOX_ARMIJO = 1e-4  # sufficient decrease along the arc (Bertsekas 1982, eq. 18)
 
 
 class SymOps:
@@ -47,6 +53,10 @@ class SymOps:
     @staticmethod
     def hcat(v, m):
         return ca.horzcat(v, m)
+
+    @staticmethod
+    def where(cond, a, b):
+        return ca.if_else(cond, a, b)
 
     @staticmethod
     def fmin(a, b):
@@ -111,6 +121,10 @@ class NumpyOps:
         return np.column_stack([v, m])
 
     @staticmethod
+    def where(cond, a, b):
+        return a if cond else b
+
+    @staticmethod
     def fmin(a, b):
         return np.minimum(a, b)
 
@@ -142,19 +156,39 @@ def _box_qp(ops, H, g, Hux, lo, hi, iterations):
     """min 0.5 du'H du + g'du, lo <= du <= hi; returns du, feedback gain, min pivot of H."""
     sol, pivot = ops.solve(H, ops.hcat(-g, -Hux))
     du = ops.clip(sol[:, 0], lo, hi)
-    for _ in range(iterations):
-        du = _free_newton(ops, H, g, Hux, du, lo, hi)[0]
+    if H.shape[0] > 1:
+        for _ in range(iterations):
+            du = _arc_search(ops, H, g, du, _free_newton(ops, H, g, Hux, du, lo, hi)[2], lo, hi)
     return du, _free_newton(ops, H, g, Hux, du, lo, hi)[1], pivot
 
 
+def _qp_value(H, g, du):
+    return 0.5 * (du.T @ H @ du) + g.T @ du
+
+
+def _arc_search(ops, H, g, du, target, lo, hi):
+    """The projected-Newton step from du towards the free-set minimiser ``target``: the largest alpha of
+    1, 1/2, ... whose point clip(du + alpha (target - du)) passes Bertsekas' Armijo test
+    q(new) <= q(du) + BOX_ARMIJO grad'(new - du); du itself when none does."""
+    grad, q0, d = H @ du + g, _qp_value(H, g, du), target - du
+    best = du
+    for i in reversed(range(BOX_HALVINGS)):  # the largest passing step is assigned last
+        trial = ops.clip(du + 0.5 ** i * d, lo, hi)
+        ok = _qp_value(H, g, trial) <= q0 + BOX_ARMIJO * (grad.T @ (trial - du))
+        best = ops.where(ok, trial, best)
+    return best
+
+
 def _free_newton(ops, H, g, Hux, du, lo, hi):
-    """Newton step on the controls not clamped at du; clamped rows get zero feedback."""
+    """Newton step on the controls not clamped at du: the clipped and the unclipped minimiser over the free set
+    (clamped controls kept), and its feedback gain (clamped rows zero)."""
     clamped = _clamped(ops, du, g + H @ du, lo, hi)
     M = ops.diag(1 - clamped)
     fixed = clamped * du
     Hm = M @ H @ M + ops.eye(H.shape[0]) - M
     sol, _ = ops.solve(Hm, ops.hcat(-(M @ (g + H @ fixed)), -(M @ Hux)))
-    return ops.clip(M @ sol[:, 0] + fixed, lo, hi), sol[:, 1:]
+    target = M @ sol[:, 0] + fixed
+    return ops.clip(target, lo, hi), sol[:, 1:], target
 
 
 def backward_step(ops, model, a, b, Vxx, c, u, lb, ub, reg, box_iterations, has_box):
@@ -218,7 +252,7 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False):
     """Symbolic local model of the augmented-Lagrangian cost (and dynamics) at one knot.
 
     Cost 0.5|r|^2 + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho) (PHR augmented Lagrangian
-    for g <= 0). Gauss-Newton Hessians J'J and rho Jg' diag(active) Jg; with ``full`` the
+    for g <= 0, one penalty rho per row of g). Gauss-Newton Hessians J'J and Jg' diag(rho active) Jg; with ``full`` the
     exact Hessians (plus the residual and multiplier curvature terms).
     """
     z = x if terminal else ca.vertcat(x, u)
@@ -234,7 +268,7 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False):
         mult = ca.fmax(0, lam + rho * g)
         active = lam + rho * g > 0
         grad += Jg.T @ mult
-        hess += rho * Jg.T @ ca.diag(active) @ Jg
+        hess += Jg.T @ ca.diag(rho * active) @ Jg
         if full:
             mu = type(x).sym("mu", g.numel())
             hess += ca.substitute(ca.hessian(ca.dot(mu, g), z)[0], mu, mult)

@@ -1,5 +1,11 @@
 """Constrained multiple-shooting DDP / iLQR with an augmented Lagrangian.
 
+The loop (``DDPSolver._run``) is a sequence of named steps, as crocoddyl's solvers: ``_direction`` (backward
+pass and regularisation), ``_stopping`` (the convergence test, the end of an inner loop and the multiplier
+update, or the infeasibility certificate), ``_step`` (line search), ``_accepted`` (regularisation schedule,
+history, the callback, the first-order convergence check). ``solve(..., callback=f)`` calls ``f`` once per
+accepted iteration with a read-only :class:`IterationView`; ``f`` returning True stops the solve.
+
 Method (each part stated, as logged):
 - Local model: Gauss-Newton iLQR (cost Hessian J'J, no dynamics curvature) by default;
   ``full_second_order`` uses exact cost Hessians and the dynamics tensor contracted with the
@@ -9,13 +15,19 @@ Method (each part stated, as logged):
   forward pass closes a fraction alpha of every gap, so an infeasible warm start is accepted
   and a full step yields a dynamically feasible trajectory. x_0 is set to x0 before the first
   iteration.
-- Control box: box-QP per knot by projected Newton (see _riccati), forward pass clamps.
+- Control box: box-QP per knot by projected Newton with a search along the projection arc, up to
+  ``box_iterations`` steps (exact on random QPs with 2-7 controls in 3; see _riccati), forward pass clamps.
 - Inequalities g <= 0 (stage and terminal): PHR augmented Lagrangian (as ALTRO, Howell et al.
-  IROS 2019): inner DDP iterations on cost + sum (max(0, lam + rho g)^2 - lam^2) / (2 rho);
-  when the inner stationarity is below the current inner tolerance (or after
+  IROS 2019; solvers/_augmented_lagrangian.py): inner DDP iterations on cost + sum (max(0, lam + rho g)^2
+  - lam^2) / (2 rho); when the inner stationarity is below the current inner tolerance (or after
   ``inner_max_iterations`` inner iterations), multipliers are updated lam <- max(0, lam + rho g)
-  and rho grows by ``penalty_factor`` when the violation did not fall to a quarter of its value
-  at the previous update (at the first update of a cold start: of the initial guess's).
+  and, one penalty per constraint row (rows in degC, V, rad, rad/s each get their own), rho grows by
+  ``penalty_factor`` where the row is violated and its violation did not fall to a quarter of its value
+  at the previous update (at the first update of a cold start: of the initial guess's), and shrinks by
+  sqrt(``penalty_factor``), not below ``penalty_init``, where it fell below a hundredth of it.
+  "infeasible" only with a certificate: at two updates after converged inner loops, the penalty grew
+  ``infeasibility_growth`` times and the violation did not halve (an inner loop stopped by
+  ``inner_max_iterations`` is no evidence).
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36).
@@ -36,7 +48,10 @@ Method (each part stated, as logged):
   32), and the jump made receding-horizon re-solves near infeasibility fail more often.
 - Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
   no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
-  progress is possible above rounding), the largest gap <= ``gap_tolerance`` and
+  progress is possible above rounding, and |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left
+  lies along the penalty's large curvature; measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's
+  longest-hold probes, at costs of hundreds), the largest gap <=
+  ``gap_tolerance`` and
   |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps closed) from an
   iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by
   a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
@@ -54,14 +69,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
-from ._backends import Layout, make_backend
+from . import _augmented_lagrangian as al
+from ._backends import make_backend
+from ._layout import Layout
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
 from .result import HISTORY_KEYS, STATUSES, SolverResult, WarmStart, constraint_violation
 
@@ -82,7 +99,9 @@ class DDPSettings:
     tolerance: float = 1e-6                 # projected |Qu|_inf at convergence
     gap_tolerance: float = 1e-8             # largest dynamics gap at convergence
     constraint_tolerance: float = 1e-6      # |max(g, -lam/rho)|_inf at convergence
-    decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|)
+    decrement_tolerance: float = 1e-12      # or: predicted decrease |d1| <= this * (1 + |cost|) ...
+    flat_stationarity: float = 1e-5         # ... and |Qu|_inf <= this * (1 + |cost|) (never while |Qu| is large)
+    merit_resolution: float = 1e-9          # a failed line search predicting less (x (1 + |cost|)) ends the inner loop
     inner_tolerance_init: float = 1e-2      # first inner tolerance of the AL loop (cold start)
     inner_tolerance_factor: float = 0.1     # inner tolerance shrink per converged inner loop
     inner_max_iterations: int = 25          # multiplier update after this many inner iterations at most
@@ -100,7 +119,7 @@ class DDPSettings:
     penalty_factor: float = 10.0
     penalty_max: float = 1e8
     infeasibility_growth: float = 1e3       # "infeasible" if the violation has not halved while rho grew this much
-    box_iterations: int = 2                 # projected-Newton passes per knot (nu > 1)
+    box_iterations: int = 8                 # projected-Newton steps per knot at most (nu > 1; see _riccati)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
     compiler_flags: tuple = ("-O2", "-march=native")  # gcc; big generated files at -O1/-O0 (see codegen)
 
@@ -110,7 +129,8 @@ class DDPSettings:
             v = getattr(self, name)
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
                     "expected an integer >= 0")
-        positive = ("tolerance", "decrement_tolerance", "gap_tolerance", "constraint_tolerance",
+        positive = ("tolerance", "decrement_tolerance", "flat_stationarity", "merit_resolution", "gap_tolerance",
+                    "constraint_tolerance",
                     "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease", "penalty_init",
                     "penalty_factor", "penalty_max", "line_search_min_step", "infeasibility_growth")
         for name in positive:
@@ -154,6 +174,80 @@ class _Iterate:
     C: np.ndarray
 
 
+@dataclasses.dataclass(frozen=True)
+class IterationView:
+    """Read-only figures of one accepted iteration, given to the solve's callback (HISTORY_KEYS and the
+    work of the iteration's line search)."""
+
+    iteration: int
+    cost: float
+    merit: float
+    violation: float
+    gap: float
+    stationarity: float
+    step: float
+    reg: float
+    alpha: float
+    penalty: float
+    forward_passes: int
+
+
+@dataclasses.dataclass(frozen=True)
+class _Direction:
+    """A backward pass's outcome at the current iterate: policy, model decrease terms and the stopping figures."""
+
+    policy: np.ndarray
+    d1: float
+    d2: float
+    stat: float     # projected |Qu|_inf
+    gap: float      # largest dynamics gap
+    kkt_c: float    # |max(g, -lam/rho)|_inf
+    flat: bool      # predicted decrease below rounding
+
+
+@dataclasses.dataclass
+class _Workspace:
+    """The state of one solve (never returned): iterate, multipliers, penalty, schedules, counts, history."""
+
+    it: _Iterate
+    P: np.ndarray
+    lam: np.ndarray
+    lamN: np.ndarray
+    rho: np.ndarray                 # a penalty per row of g, then of g_N
+    reg: float
+    omega: float                    # the inner loop's stationarity tolerance
+    viol_prev: np.ndarray           # the rows' violations at the previous multiplier update
+    start: float
+    first: tuple | None = None      # the fused first pass's backward outputs, used by the first direction
+    mu_gap: float = 0.0
+    inner: int = 0
+    iteration: int = 0
+    alpha: float = 0.0
+    tries: int = 0
+    policy: np.ndarray | None = None
+    values: np.ndarray | None = None
+    costates: np.ndarray | None = None
+    status: str | None = None
+    message: str = ""
+    counts: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(PASS_COUNTS, 0))
+    hist: dict = dataclasses.field(default_factory=lambda: {k: [] for k in HISTORY_KEYS})
+    al_log: list = dataclasses.field(default_factory=list)  # al.Update at each multiplier update
+
+    def stop(self, status: str, message: str) -> None:
+        self.status, self.message = status, message
+
+    def record(self, solver: "DDPSolver", stat, gap, step, alpha) -> IterationView:
+        """Append this iteration's figures to the history; its read-only view."""
+        it_, pr = self.it, solver.problem
+        view = IterationView(
+            self.iteration, float(it_.J), float(it_.J + al.terms(it_.G, it_.GN, self.lam, self.lamN, self.rho)),
+            constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub), float(gap), float(stat),
+            float(step), float(self.reg), float(alpha), float(np.max(self.rho, initial=0.0)), self.tries)
+        for key in HISTORY_KEYS:
+            self.hist[key].append(getattr(view, key))
+        return view
+
+
 class DDPSolver:
     """Build once (all code generation and compilation here), then ``solve`` many times."""
 
@@ -169,6 +263,7 @@ class DDPSolver:
         self.problem, self.settings = problem, settings
         self.layout = Layout(problem.nx, problem.nu)
         self._ng, self._ngN = problem.n_constraints, problem.n_terminal_constraints  # sizes, computed once
+        self._has_constraints = self._ng + self._ngN > 0
         start = time.perf_counter()
         self.backend = make_backend(problem, settings, self.layout)
         self.kkt, self._rows = KKTEvaluator(problem), constraint_rows(problem)
@@ -182,20 +277,36 @@ class DDPSolver:
                  settings.gap_tolerance, settings.constraint_tolerance)
 
     # -- public ---------------------------------------------------------------------------------
-    def solve(self, x0, params=None, warm_start: WarmStart | SolverResult | None = None) -> SolverResult:
-        """Solve from initial state x0 with per-knot params (N+1, np) and an optional warm start."""
+    def solve(self, x0, params=None, warm_start: WarmStart | SolverResult | None = None,
+              callback: Callable[[IterationView], bool | None] | None = None) -> SolverResult:
+        """Solve from initial state x0 with per-knot params (N+1, np) and an optional warm start.
+
+        ``callback`` (as crocoddyl's ``CallbackAbstract``) is called once per accepted iteration with a
+        read-only :class:`IterationView`; returning True stops the solve (status "failed", reason "stopped")."""
         pr = self.problem
         x0 = pr.check_x0(x0, "DDPSolver.solve")
         P = np.ascontiguousarray(pr.check_params(params, "DDPSolver.solve"))
+        if callback is not None and not callable(callback):
+            raise InputError("DDPSolver.solve", "callback", type(callback).__name__, "expected a callable")
         X, U, lam, lamN, rho, cold = self._initial_guess(x0, warm_start)
         start = time.perf_counter()
-        return self._run(X, U, P, lam, lamN, rho, cold, start)
+        s = self.settings
+        evaluation, first = self.backend.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass
+        it_ = _Iterate(X, U, *evaluation)
+        viol0 = al.row_violation(it_.G, it_.GN) if cold else np.full(rho.size, np.inf)  # cold: vs the guess's
+        ws = _Workspace(it_, P, lam, lamN, rho, reg=s.reg_init, start=start, first=first, viol_prev=viol0,
+                        omega=max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance))
+        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
+            ws.first = None
+            ws.stop("numerical_error", "the model gives non-finite values at the initial guess")
+            return self._finish(ws)
+        return self._run(ws, callback)
 
     # -- internals ------------------------------------------------------------------------------
     def _initial_guess(self, x0, warm):
         pr, s = self.problem, self.settings
         N, ng, ngN = pr.horizon, self._ng, self._ngN
-        lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), s.penalty_init, True
+        lam, lamN, rho, cold = np.zeros((N, ng)), np.zeros(ngN), np.full(ng + ngN, s.penalty_init), True
         if warm is None:
             xs, us = np.tile(x0, (N + 1, 1)), np.zeros((N, pr.nu))
         else:
@@ -211,115 +322,135 @@ class DDPSolver:
             if m.get("terminal_constraints") is not None and np.shape(m["terminal_constraints"]) == (ngN,):
                 lamN = np.maximum(np.asarray(m["terminal_constraints"], float), 0.0)
             if m.get("penalty") is not None:
-                rho = float(np.clip(m["penalty"], s.penalty_init, s.penalty_max))
+                if np.size(m["penalty"]) in (1, ng + ngN):  # one for all rows, or one per row
+                    rho = np.clip(np.broadcast_to(np.asarray(m["penalty"], float).ravel(), (ng + ngN,)),
+                                  s.penalty_init, s.penalty_max)
         X = np.array(xs, dtype=float)
         X[0] = x0
         U = np.ascontiguousarray(np.clip(us, pr.u_lb, pr.u_ub))
         return X, U, lam, lamN, rho, cold
 
-    def _al(self, G, GN, lam, lamN, rho) -> float:
-        """Augmented-Lagrangian terms sum (max(0, lam + rho g)^2 - lam^2) / (2 rho)."""
-        return float((np.sum(np.maximum(0.0, lam + rho * G) ** 2 - lam ** 2)
-                      + np.sum(np.maximum(0.0, lamN + rho * GN) ** 2 - lamN ** 2)) / (2 * rho))
-
-    @staticmethod
-    def _kkt_constraint(G, GN, lam, lamN, rho) -> float:
-        vals = [np.max(np.abs(np.maximum(G, -lam / rho)))] if G.size else [0.0]
-        if GN.size:
-            vals.append(np.max(np.abs(np.maximum(GN, -lamN / rho))))
-        return float(max(vals))
-
-    def _run(self, X, U, P, lam, lamN, rho, cold, start) -> SolverResult:
-        s, pr, be = self.settings, self.problem, self.backend
-        has_constraints = self._ng + self._ngN > 0
-        evaluation, first = be.evaluate_backward(X, U, P, lam, lamN, rho, s.reg_init)  # the first pass, fused
-        it_ = _Iterate(X, U, *evaluation)
-        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
-            return self._result(it_, P, lam, lamN, rho, None, "numerical_error",
-                                "the model gives non-finite values at the initial guess", 0, start,
-                                {k: [] for k in HISTORY_KEYS})
-        reg, mu_gap, omega = s.reg_init, 0.0, max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance)
-        viol_prev = self._violation(it_) if cold else np.inf  # a cold start's first loop must cut it to a quarter
-        al_log: list[tuple[float, float]] = []  # (penalty, violation) at each multiplier update
-        hist = {k: [] for k in HISTORY_KEYS}
-        status, message = "max_iterations", f"no convergence in {s.max_iterations} iterations"
-        policy = values = costates = None
-        iteration = inner = 0
-        counts = dict.fromkeys(PASS_COUNTS, 0)  # the work done: passes of each kind, multiplier updates
-        while iteration < s.max_iterations and counts["backward_passes"] < 4 * s.max_iterations + 20:
-            counts["backward_passes"] += 1
-            policy_try, summary, values_try = first or be.backward(it_.X, it_.U, P, lam, lamN, it_.C, rho, reg)
-            first = None
-            d1, d2, stat, pivot = summary
-            if not (pivot > 0 and np.all(np.isfinite(summary))):
-                reg = self._increase(reg, policy_try)
-                log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", iteration, pivot, reg)
-                if reg > s.reg_max:
-                    status, message = "regularisation_failed", "Quu not positive definite up to reg_max"
-                    break
+    def _run(self, ws: "_Workspace", callback) -> SolverResult:
+        """The loop: per pass a direction, the stopping test (or a multiplier update), a step, the callback."""
+        s = self.settings
+        while ws.status is None:
+            if ws.iteration >= s.max_iterations or ws.counts["backward_passes"] >= 4 * s.max_iterations + 20:
+                ws.stop("max_iterations", f"no convergence in {s.max_iterations} iterations")
+                break
+            direction = self._direction(ws)
+            if direction is None or self._stopping(ws, direction) or not self._step(ws, direction):
                 continue
-            policy, values = policy_try, values_try
-            gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
-            kkt_c = self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho)
-            flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)) and reg <= s.reg_min
-            inner_done = (stat <= omega or flat) and gap <= s.gap_tolerance
-            if inner_done or (has_constraints and inner >= s.inner_max_iterations and kkt_c > s.constraint_tolerance):
-                if inner_done and (stat <= s.tolerance or flat) and kkt_c <= s.constraint_tolerance:
-                    status = "converged"
-                    message = ("predicted decrease below rounding" if stat > s.tolerance else "stationarity") + \
-                        ", gaps and constraints within tolerance"
-                    self._record(hist, it_, lam, lamN, rho, stat, gap, 0.0, reg, 0.0)
-                    break
-                if inner_done:
-                    omega = max(s.tolerance, omega * s.inner_tolerance_factor)
-                if has_constraints and kkt_c > s.constraint_tolerance:
-                    inner = 0
-                    al_log.append((rho, self._violation(it_)))
-                    if self._stalled(al_log):
-                        status = "infeasible"
-                        message = (f"locally infeasible: the violation {al_log[-1][1]:.3g} did not halve while "
-                                   f"the penalty grew {s.infeasibility_growth:g}x")
-                        break
-                    lam, lamN, rho, viol_prev = self._update_multipliers(it_, lam, lamN, rho, viol_prev)
-                    counts["multiplier_updates"] += 1
-                    continue
-            alpha, trial, mu_gap, tries = self._line_search(it_, P, policy, d1, d2, lam, lamN, rho, mu_gap)
-            counts["forward_passes"] += tries
-            if trial is None:
-                if has_constraints and abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J)):
-                    inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
-                reg = self._increase(reg)
-                log.debug("iteration %d: line search failed, reg -> %.1e", iteration, reg)
-                if reg > s.reg_max:
-                    status, message = "line_search_failed", "no acceptable step up to reg_max"
-                    break
-                continue
-            iteration, inner = iteration + 1, inner + 1
-            step = alpha * float(np.max(np.abs(policy[:, : pr.nu])))
-            it_ = trial
-            if alpha == 1.0:
-                reg = reg / s.reg_decrease if reg / s.reg_decrease >= s.reg_min else 0.0
-            elif alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
-                reg = self._increase(reg)
-            self._record(hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha)
-            log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", iteration, it_.J,
-                      stat, gap, alpha, reg, rho)
-            if alpha == 1.0 and stat <= s.tolerance ** 0.5 and \
-                    self._kkt_constraint(it_.G, it_.GN, lam, lamN, rho) <= s.constraint_tolerance:
-                counts["gradient_passes"] += 1  # the step closed the gaps: a first-order pass may show convergence
-                stat_new, a = be.gradient(it_.X, it_.U, P, lam, lamN, policy, rho)
-                if stat_new <= s.tolerance:
-                    status = "converged"
-                    message = "stationarity (previous gains), gaps and constraints within tolerance"
-                    self._record(hist, it_, lam, lamN, rho, stat_new, 0.0, 0.0, reg, 0.0)
-                    costates = a
-                    break
-        lam_out = np.maximum(0.0, lam + rho * it_.G)
-        lamN_out = np.maximum(0.0, lamN + rho * it_.GN)
-        if costates is None and values is not None:
-            costates = self.layout.costates(values)
-        return self._result(it_, P, lam_out, lamN_out, rho, (policy, costates), status, message, iteration, start,
-                            hist, counts, al_log)
+            self._accepted(ws, direction, callback)
+        return self._finish(ws)
+
+    def _direction(self, ws: "_Workspace") -> "_Direction | None":
+        """Backward pass with regularisation; None after a failed pass (regularisation raised, or exhausted:
+        then the workspace is stopped)."""
+        s = self.settings
+        ws.counts["backward_passes"] += 1
+        it_ = ws.it
+        policy, summary, values = ws.first or self.backend.backward(it_.X, it_.U, ws.P, ws.lam, ws.lamN, it_.C,
+                                                                    ws.rho, ws.reg)
+        ws.first = None
+        d1, d2, stat, pivot = summary
+        if not (pivot > 0 and np.all(np.isfinite(summary))):
+            ws.reg = self._increase(ws.reg, policy)
+            log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", ws.iteration, pivot, ws.reg)
+            if ws.reg > s.reg_max:
+                ws.stop("regularisation_failed", "Quu not positive definite up to reg_max")
+            return None
+        ws.policy, ws.values = policy, values
+        gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
+        kkt_c = al.kkt_constraint(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
+        flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J))
+        return _Direction(policy, float(d1), float(d2), float(stat), gap, kkt_c, flat)
+
+    def _stopping(self, ws: "_Workspace", d: "_Direction") -> bool:
+        """The stopping test and the end of an inner loop: True when the solve stopped (converged or certified
+        infeasible) or the multipliers were updated (no step at this direction)."""
+        s = self.settings
+        flat = d.flat and ws.reg <= s.reg_min
+        inner_done = (d.stat <= ws.omega or flat) and d.gap <= s.gap_tolerance
+        over = self._has_constraints and ws.inner >= s.inner_max_iterations and d.kkt_c > s.constraint_tolerance
+        if not (inner_done or over):
+            return False
+        flat_ok = flat and d.stat <= s.flat_stationarity * (1.0 + abs(ws.it.J))
+        if inner_done and (d.stat <= s.tolerance or flat_ok) and d.kkt_c <= s.constraint_tolerance:
+            ws.record(self, d.stat, d.gap, 0.0, 0.0)
+            ws.stop("converged", ("predicted decrease below rounding" if d.stat > s.tolerance else "stationarity")
+                    + ", gaps and constraints within tolerance")
+            return True
+        if inner_done:
+            ws.omega = max(s.tolerance, ws.omega * s.inner_tolerance_factor)
+        if not (self._has_constraints and d.kkt_c > s.constraint_tolerance):
+            return False
+        ws.inner = 0
+        ws.al_log.append(al.Update.at(s, ws.it.G, ws.it.GN, ws.rho, inner_done))
+        if al.stalled(s, ws.al_log):
+            ws.stop("infeasible", f"locally infeasible: the violation {ws.al_log[-1].violation:.3g} did not halve "
+                    f"while the penalty grew {s.infeasibility_growth:g}x")
+            return True
+        ws.lam, ws.lamN, ws.rho, ws.viol_prev = al.update(s, ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho,
+                                                          ws.viol_prev)
+        ws.counts["multiplier_updates"] += 1
+        return True
+
+    def _step(self, ws: "_Workspace", d: "_Direction") -> bool:
+        """The line search along the direction; on failure the regularisation grows (False)."""
+        s = self.settings
+        alpha, trial, ws.mu_gap, tries = self._line_search(ws.it, ws.P, d.policy, d.d1, d.d2, ws.lam, ws.lamN,
+                                                           ws.rho, ws.mu_gap)
+        ws.counts["forward_passes"] += tries
+        ws.tries = tries
+        if trial is None:
+            if self._has_constraints and abs(d.d1) <= s.merit_resolution * (1.0 + abs(ws.it.J)):
+                ws.inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
+            ws.reg = self._increase(ws.reg)
+            log.debug("iteration %d: line search failed, reg -> %.1e", ws.iteration, ws.reg)
+            if ws.reg > s.reg_max:
+                ws.stop("line_search_failed", "no acceptable step up to reg_max")
+            return False
+        ws.it, ws.alpha = trial, alpha
+        return True
+
+    def _accepted(self, ws: "_Workspace", d: "_Direction", callback) -> None:
+        """After an accepted step: regularisation schedule, history, callback and the first-order check of
+        convergence after a full step."""
+        s = self.settings
+        ws.iteration, ws.inner = ws.iteration + 1, ws.inner + 1
+        if ws.alpha == 1.0:
+            ws.reg = ws.reg / s.reg_decrease if ws.reg / s.reg_decrease >= s.reg_min else 0.0
+        elif ws.alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
+            ws.reg = self._increase(ws.reg)
+        step = ws.alpha * float(np.max(np.abs(d.policy[:, : self.problem.nu]), initial=0.0))
+        view = ws.record(self, d.stat, d.gap, step, ws.alpha)
+        log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", ws.iteration, ws.it.J,
+                  d.stat, d.gap, ws.alpha, ws.reg, view.penalty)
+        if callback is not None and callback(view):
+            ws.stop("stopped", f"stopped by the callback after iteration {ws.iteration}")
+            return
+        if ws.alpha == 1.0 and d.stat <= s.tolerance ** 0.5 and \
+                al.kkt_constraint(ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho) <= s.constraint_tolerance:
+            self._first_order_check(ws, d)
+
+    def _first_order_check(self, ws: "_Workspace", d: "_Direction") -> None:
+        """The step closed the gaps: a first-order pass with the last gains may show convergence already."""
+        ws.counts["gradient_passes"] += 1
+        stat, costates = self.backend.gradient(ws.it.X, ws.it.U, ws.P, ws.lam, ws.lamN, d.policy, ws.rho)
+        if stat <= self.settings.tolerance:
+            ws.record(self, stat, 0.0, 0.0, 0.0)
+            ws.costates = costates
+            ws.stop("converged", "stationarity (previous gains), gaps and constraints within tolerance")
+
+    def _finish(self, ws: "_Workspace") -> SolverResult:
+        it_ = ws.it
+        lam_out, lamN_out = al.multipliers(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
+        if not (np.all(np.isfinite(lam_out)) and np.all(np.isfinite(lamN_out))):  # a non-finite iterate
+            lam_out, lamN_out = ws.lam, ws.lamN
+        if ws.costates is None and ws.values is not None:
+            ws.costates = self.layout.costates(ws.values)
+        return self._result(it_, ws.P, lam_out, lamN_out, ws.rho, (ws.policy, ws.costates), ws.status, ws.message,
+                            ws.iteration, ws.start, ws.hist, ws.counts, ws.al_log)
 
     def _increase(self, reg: float, policy=None) -> float:
         """reg x reg_factor; after a failed backward pass (``policy``) at least reg - 2 p, with p the
@@ -334,27 +465,6 @@ class DDPSolver:
                 reg_new = max(reg_new, jump)
         return reg_new
 
-    @staticmethod
-    def _violation(it_) -> float:
-        return max(float(np.max(it_.G, initial=0.0)), float(np.max(it_.GN, initial=0.0)))
-
-    def _stalled(self, al_log: list[tuple[float, float]]) -> bool:
-        """True when, since the penalty was ``infeasibility_growth`` times smaller, the violation has
-        not halved: more penalty no longer buys feasibility (a local infeasibility certificate)."""
-        rho, viol = al_log[-1]
-        earlier = [v for r, v in al_log if r * self.settings.infeasibility_growth <= rho]
-        return bool(earlier) and viol > 0.5 * earlier[-1] and viol > 10 * self.settings.constraint_tolerance
-
-    def _update_multipliers(self, it_, lam, lamN, rho, viol_prev):
-        s = self.settings
-        viol = self._violation(it_)
-        lam = np.maximum(0.0, lam + rho * it_.G)
-        lamN = np.maximum(0.0, lamN + rho * it_.GN)
-        if viol > 0.25 * viol_prev:
-            rho = min(rho * s.penalty_factor, s.penalty_max)
-        log.debug("multiplier update: violation %.2e, rho %.1e", viol, rho)
-        return lam, lamN, rho, viol
-
     def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap):
         """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty, forward passes)."""
         s, be = self.settings, self.backend
@@ -362,27 +472,20 @@ class DDPSolver:
         if gap_l1 > 0:
             need = (d1 + 0.5 * max(d2, 0.0)) / (0.9 * gap_l1)
             mu_gap = max(mu_gap, need + 1e-8)
-        merit0 = it_.J + self._al(it_.G, it_.GN, lam, lamN, rho) + mu_gap * gap_l1
+        merit0 = it_.J + al.terms(it_.G, it_.GN, lam, lamN, rho) + mu_gap * gap_l1
         noise = 1e-13 * (1.0 + abs(merit0))
         alpha, tries = 1.0, 0
         while alpha >= s.line_search_min_step:
             tries += 1
             X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
             if np.isfinite(J) and np.all(np.isfinite(X)):
-                merit = J + self._al(G, GN, lam, lamN, rho) + mu_gap * (1 - alpha) * gap_l1
+                merit = J + al.terms(G, GN, lam, lamN, rho) + mu_gap * (1 - alpha) * gap_l1
                 model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
                 if merit - merit0 <= s.armijo * min(model, 0.0) + noise:
                     C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
                     return alpha, _Iterate(X, U, J, G, GN, C), mu_gap, tries
             alpha *= s.line_search_factor
         return alpha, None, mu_gap, tries
-
-    def _record(self, hist, it_, lam, lamN, rho, stat, gap, step, reg, alpha):
-        viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, self.problem.u_lb, self.problem.u_ub)
-        for key, value in (("cost", it_.J), ("merit", it_.J + self._al(it_.G, it_.GN, lam, lamN, rho)),
-                           ("violation", viol), ("gap", gap), ("stationarity", stat), ("step", step),
-                           ("reg", reg), ("alpha", alpha), ("penalty", rho)):
-            hist[key].append(float(value))
 
     def _result(self, it_, P, lam, lamN, rho, pol, status, message, iterations, start, hist,
                 counts: Mapping[str, int] | None = None, al_log=()) -> SolverResult:
@@ -392,7 +495,7 @@ class DDPSolver:
         solve_s = time.perf_counter() - start
         viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
         K = k = None
-        mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho}
+        mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho.copy()}
         if pol is not None and pol[0] is not None:
             k, K = self.layout.gains(pol[0])
             mult["dynamics"] = pol[1][1:]
@@ -402,9 +505,13 @@ class DDPSolver:
         viol = viol if np.isfinite(viol) else float("inf")
         reason, certificate = ("", None) if status == "converged" else (status, None)
         if status == "infeasible":
-            reason, certificate = "locally_infeasible", self._certificate(it_, al_log)
-        kkt = self.kkt.residuals(it_.X, it_.U, P, lam, lamN, it_.X[0]) if finite else dict.fromkeys(KKT_KEYS, float("inf"))
-        log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", reason or status, iterations, it_.J, viol, 1e3 * solve_s)
+            reason = "locally_infeasible"
+            certificate = al.certificate(self.settings, self._rows, it_.G, it_.GN, al_log)
+        kkt = dict.fromkeys(KKT_KEYS, float("inf"))
+        if finite:  # x_0 is x0 on every DDP iterate (set before the first pass, kept by the rollouts)
+            kkt = self.kkt.residuals(it_.X, it_.U, P, lam, lamN, it_.X[0])
+        log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", reason or status, iterations,
+                 it_.J, viol, 1e3 * solve_s)
         return SolverResult(solver=f"ddp[{self.backend.name}]", success=status == "converged",
                             status=status if status in STATUSES else "failed", reason=reason, message=message,
                             certificate=certificate, kkt=kkt,
@@ -413,11 +520,3 @@ class DDPSolver:
                             iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
                             info={"backend": self.backend.name, **(counts or dict.fromkeys(PASS_COUNTS, 0)),
                                   "full_second_order": self.settings.full_second_order})
-
-    def _certificate(self, it_, al_log) -> dict:
-        """Penalties and violations at the multiplier updates, and the constraints violated at the end."""
-        tol = self.settings.constraint_tolerance
-        names = [n for rows, G in zip(self._rows, (it_.G, it_.GN)) if G.size
-                 for n, v in zip(rows, np.max(np.atleast_2d(G), axis=0)) if v > tol]
-        return {"penalty": [float(r) for r, _ in al_log], "violation": [float(v) for _, v in al_log],
-                "constraints": list(dict.fromkeys(names))}

@@ -3,8 +3,11 @@
  *
  * Arrays are numpy C-contiguous, one row per knot (row t of X is x_t), which is CasADi's
  * column-major (dim, knots) layout: a knot's vector is the contiguous row. Sizes per knot:
- * X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), LamN (ngN), C (N, nx) gaps,
- * policy (N, n_policy) = [k; vec(K); pivot; d1; d2; stationarity], values (N+1, n_value) = [a; b; vec(Vxx)].
+ * X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), LamN (ngN), C (N, nx) gaps, rho (ng + ngN) the
+ * penalties of the rows of g then of g_N, policy (N, n_policy),
+ * values (N+1, n_value). The packing of policy and values is thermo_ddp.solvers._layout.Layout's: the driver
+ * only gets its sizes and the offset of the policy's four scalars (pivot, d1, d2, stationarity) from
+ * ddp_work_new, and reads nothing else of it.
  * Every pass returns 0, or the non-zero code of the first knot function that failed.
  */
 #include <stdlib.h>
@@ -55,7 +58,7 @@ typedef struct {
     double *value_end;
     double *model;
     double *hess;
-    int nx, nu, np, ng, ngN, n_value, n_policy;
+    int nx, nu, np, ng, ngN, n_value, n_policy, pivot; /* pivot: offset of [pivot, d1, d2, stat] in a policy row */
 } Work;
 
 void ddp_work_free(Work *W) {
@@ -84,7 +87,7 @@ static size_t nnz(const casadi_int *sp) {
     return sp[2] == 1 && sp[1] > 0 ? (size_t)(sp[0] * sp[1]) : (size_t)sp[2 + sp[1]];
 }
 
-Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
+Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_policy, int pivot) {
     work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
@@ -100,8 +103,7 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN) {
     Work *W = calloc(1, sizeof(Work));
     if (!W) return NULL;
     W->nx = nx, W->nu = nu, W->np = np, W->ng = ng, W->ngN = ngN;
-    W->n_value = 2 * nx + nx * nx;
-    W->n_policy = nu + nu * nx + 4;
+    W->n_value = n_value, W->n_policy = n_policy, W->pivot = pivot;
     W->arg = calloc(n_arg + 1, sizeof(double *));
     W->res = calloc(n_res + 1, sizeof(double *));
     W->iw = calloc(n_iw + 1, sizeof(casadi_int));
@@ -188,7 +190,7 @@ static int fused_knot(Work *W, int t, const double *X, const double *U, const do
 
 /* summary = [sum d1, sum d2, max stationarity, min pivot] over the policy rows. */
 static void summarise(const Work *W, int N, const double *policy, double *summary) {
-    const int o = W->nu + W->nu * W->nx;
+    const int o = W->pivot;
     summary[0] = summary[1] = summary[2] = 0.0;
     summary[3] = N > 0 ? policy[o] : 1.0;
     for (int t = 0; t < N; ++t) {
@@ -203,17 +205,17 @@ static void summarise(const Work *W, int N, const double *policy, double *summar
 static void mark_failed(const Work *W, int t, double *policy, double *values) {
     memset(policy, 0, (size_t)t * W->n_policy * sizeof(double));
     memset(values, 0, (size_t)t * W->n_value * sizeof(double));
-    for (int s = 0; s < t; ++s) policy[(size_t)s * W->n_policy + W->nu + W->nu * W->nx] = -1.0;
+    for (int s = 0; s < t; ++s) policy[(size_t)s * W->n_policy + W->pivot] = -1.0;
 }
 
 /* The backward pass with given gaps C, or (C == NULL) evaluating the iterate on the way: then
  * cost_out = J, and G, GN, C_out are filled for every knot even after a failed pivot. */
 static int backward_sweep(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                          const double *LamN, const double *C, double rho, double reg, double *policy,
+                          const double *LamN, const double *C, const double *rho, double reg, double *policy,
                           double *summary, double *values, double *cost_out, double *G, double *GN,
                           double *C_out) {
-    int rc = value_end(W, N, X, P, LamN, &rho, values + (size_t)N * W->n_value);
-    const int pivot = W->nu + W->nu * W->nx;
+    int rc = value_end(W, N, X, P, LamN, rho + W->ng, values + (size_t)N * W->n_value);
+    const int pivot = W->pivot;
     int failed = 0;
     double J = 0.0, cost = 0.0;
     if (C_out && !rc) rc = eval_end(W, N, X, P, &J, GN);
@@ -224,12 +226,12 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
             continue;
         }
         if (ddp_fused_step_fn) {
-            rc = fused_knot(W, t, X, U, P, Lam, C_out ? NULL : C + (size_t)t * W->nx, &rho, &reg, policy, values,
+            rc = fused_knot(W, t, X, U, P, Lam, C_out ? NULL : C + (size_t)t * W->nx, rho, &reg, policy, values,
                             &cost, G, C_out);
             J += cost;
         } else {
-            rc = C_out ? local_knot(W, t, X, U, P, Lam, &rho, &cost, G, C_out)
-                       : local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+            rc = C_out ? local_knot(W, t, X, U, P, Lam, rho, &cost, G, C_out)
+                       : local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
             J += cost;
             if (!rc) rc = back_knot(W, t, X, U, P, (C_out ? C_out : C) + (size_t)t * W->nx, &reg, policy, values);
         }
@@ -245,27 +247,27 @@ static int backward_sweep(Work *W, int N, const double *X, const double *U, cons
 }
 
 int ddp_backward(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                 const double *LamN, const double *C, double rho, double reg, double *policy, double *summary,
+                 const double *LamN, const double *C, const double *rho, double reg, double *policy, double *summary,
                  double *values) {
     return backward_sweep(W, N, X, U, P, Lam, LamN, C, rho, reg, policy, summary, values, NULL, NULL, NULL, NULL);
 }
 
 /* The first pass of a solve: per knot the evaluation (cost, g, gap), then the Riccati step with that gap. */
 int ddp_evaluate_backward(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                          const double *LamN, double rho, double reg, double *policy, double *summary,
+                          const double *LamN, const double *rho, double reg, double *policy, double *summary,
                           double *values, double *J, double *G, double *GN, double *C) {
     return backward_sweep(W, N, X, U, P, Lam, LamN, NULL, rho, reg, policy, summary, values, J, G, GN, C);
 }
 
 /* First-order pass with the gains of `policy`: costates (N+1, nx) and the largest stationarity. */
 int ddp_gradient(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
-                 const double *LamN, const double *policy, double rho, double *stat, double *costates) {
-    int rc = value_end(W, N, X, P, LamN, &rho, W->value_end);
+                 const double *LamN, const double *policy, const double *rho, double *stat, double *costates) {
+    int rc = value_end(W, N, X, P, LamN, rho + W->ng, W->value_end);
     double knot_stat = 0.0;
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        rc = local_knot(W, t, X, U, P, Lam, &rho, NULL, NULL, NULL);
+        rc = local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
         if (rc) break;
         W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = W->model;
         W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = policy + (size_t)t * W->n_policy;

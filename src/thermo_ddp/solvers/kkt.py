@@ -8,7 +8,8 @@ opposite sign), inequality multipliers mu_k >= 0 (g <= 0) and control-bound mult
     terminal L_N = 0.5 |r_N(x_N)|^2 + mu_N' g_N(x_N)
 
 - stationarity: max over knots of |dL_k/dx_k - lam_k| (k >= 1; x_0 is fixed) and |dL_k/du_k + z_k|;
-- primal: the largest of |x_0 - x0|, the dynamics gaps |f_k - x_{k+1}|, inequality max(g, 0) and control-bound violation;
+- primal: the largest of |x_0 - x0|, the dynamics gaps |f_k - x_{k+1}|, inequality max(g, 0) and
+  control-bound violation;
 - complementarity: the largest |mu g| and |z (u - bound)|, and any wrong-signed multiplier |min(mu, 0)|.
 
 A solver that has no costates (or no bound multipliers) of its own leaves them out: the costates are then

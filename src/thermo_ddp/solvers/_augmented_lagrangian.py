@@ -1,0 +1,100 @@
+"""The DDP's PHR augmented Lagrangian for g <= 0 with a penalty per constraint row: its terms, multiplier and
+penalty updates, and the local infeasibility certificate (as ALTRO, Howell et al. IROS 2019; Nocedal & Wright
+section 17.4; per-constraint penalties as in Conn, Gould & Toint's LANCELOT, 1992).
+
+``rho`` is one vector: the penalties of the rows of the stage g (shared by every knot), then of g_N. Rows in
+different units (degC, V, rad, rad/s) each get the penalty their own violation needs."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+def split(rho, G):
+    """(penalties of the stage rows, of the terminal rows)."""
+    ng = G.shape[-1] if G.ndim == 2 else 0
+    return rho[:ng], rho[ng:]
+
+
+def terms(G, GN, lam, lamN, rho) -> float:
+    """sum (max(0, lam + rho g)^2 - lam^2) / (2 rho) over the stage and terminal constraints."""
+    rg, rN = split(rho, G)
+    return float(np.sum((np.maximum(0.0, lam + rg * G) ** 2 - lam ** 2) / (2 * rg))
+                 + np.sum((np.maximum(0.0, lamN + rN * GN) ** 2 - lamN ** 2) / (2 * rN)))
+
+
+def multipliers(G, GN, lam, lamN, rho):
+    """The first-order multiplier estimates max(0, lam + rho g)."""
+    rg, rN = split(rho, G)
+    return np.maximum(0.0, lam + rg * G), np.maximum(0.0, lamN + rN * GN)
+
+
+def kkt_constraint(G, GN, lam, lamN, rho) -> float:
+    """|max(g, -lam/rho)|_inf: zero exactly at a feasible, complementary point."""
+    rg, rN = split(rho, G)
+    vals = [np.max(np.abs(np.maximum(G, -lam / rg)))] if G.size else [0.0]
+    if GN.size:
+        vals.append(np.max(np.abs(np.maximum(GN, -lamN / rN))))
+    return float(max(vals))
+
+
+def row_violation(G, GN) -> np.ndarray:
+    """The largest violation max(g, 0) of every row (stage rows over the knots, then terminal rows)."""
+    stage = np.max(np.maximum(G, 0.0), axis=0) if G.size else np.zeros(G.shape[-1] if G.ndim == 2 else 0)
+    return np.concatenate([stage, np.maximum(GN, 0.0)])
+
+
+def violation(G, GN) -> float:
+    return float(np.max(row_violation(G, GN), initial=0.0))
+
+
+@dataclasses.dataclass(frozen=True)
+class Update:
+    """One multiplier update: the largest penalty of the violated rows (of all rows when none is) and the
+    largest violation there, and whether the inner loop before it had converged (only those count as
+    evidence of infeasibility)."""
+
+    penalty: float
+    violation: float
+    converged: bool
+
+    @staticmethod
+    def at(settings, G, GN, rho, converged: bool) -> "Update":
+        rows = row_violation(G, GN)
+        violated = rows > settings.constraint_tolerance
+        penalty = np.max(rho[violated]) if violated.any() else np.max(rho, initial=0.0)
+        return Update(float(penalty), float(np.max(rows, initial=0.0)), converged)
+
+
+def update(settings, G, GN, lam, lamN, rho, viol_prev):
+    """lam <- max(0, lam + rho g); per row, rho x penalty_factor where the row is violated and its violation did
+    not fall to a quarter of its previous value, / sqrt(penalty_factor) (not below penalty_init) where it fell
+    below a hundredth of it: each row's penalty only as large as its feasibility needs. ``viol_prev`` (per row;
+    inf: no previous update). Returns (lam, lamN, rho, the rows' violations)."""
+    viol = row_violation(G, GN)
+    lam, lamN = multipliers(G, GN, lam, lamN, rho)
+    grow = (viol > 0.25 * viol_prev) & (viol > settings.constraint_tolerance)
+    shrink = np.isfinite(viol_prev) & (viol < 0.01 * viol_prev)
+    rho = np.where(grow, np.minimum(rho * settings.penalty_factor, settings.penalty_max), rho)
+    rho = np.where(shrink, np.maximum(rho / settings.penalty_factor ** 0.5, settings.penalty_init), rho)
+    return lam, lamN, rho, viol
+
+
+def stalled(settings, log: list[Update]) -> bool:
+    """True when the last update followed a converged inner loop and, since a converged one at a penalty
+    ``infeasibility_growth`` times smaller, the violation has not halved: more penalty no longer buys
+    feasibility (a local infeasibility certificate)."""
+    last = log[-1]
+    earlier = [u.violation for u in log if u.converged and u.penalty * settings.infeasibility_growth <= last.penalty]
+    return (last.converged and bool(earlier) and last.violation > 0.5 * earlier[-1]
+            and last.violation > 10 * settings.constraint_tolerance)
+
+
+def certificate(settings, rows, G, GN, log: list[Update]) -> dict:
+    """The evidence of :func:`stalled`: penalties and violations at the converged inner loops' updates, and
+    the constraints violated at the end (``rows``: the names of the rows of g and g_N)."""
+    names = [n for n, v in zip(rows[0] + rows[1], row_violation(G, GN)) if v > settings.constraint_tolerance]
+    kept = [u for u in log if u.converged]
+    return {"penalty": [u.penalty for u in kept], "violation": [u.violation for u in kept],
+            "constraints": list(dict.fromkeys(names))}

@@ -1,0 +1,70 @@
+"""The DDP's augmented-Lagrangian rules (solvers/_augmented_lagrangian.py): penalties that fall as well as
+grow, infeasibility certified only by converged inner loops, and the flat stopping rule bounded by |Qu|."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from thermo_ddp.solvers import _augmented_lagrangian as al
+from thermo_ddp.solvers.ddp import DDPSettings
+
+S = DDPSettings()
+G, GN = np.array([[0.2, -1.0], [-0.5, 0.1]]), np.array([0.05])
+LAM, LAMN = np.array([[1.0, 0.0], [0.5, 2.0]]), np.array([0.0])
+
+
+def test_terms_are_the_phr_penalty():
+    rho = np.array([10.0, 3.0, 50.0])  # one per row: the two stage rows, then the terminal row
+    rows = np.r_[np.tile(rho[:2], 2), rho[2]]
+    expected = sum((max(0.0, lam + r * g) ** 2 - lam ** 2) / (2 * r)
+                   for lam, g, r in zip(np.r_[LAM.ravel(), LAMN], np.r_[G.ravel(), GN], rows))
+    assert al.terms(G, GN, LAM, LAMN, rho) == pytest.approx(expected)
+    # the multiplier update is the gradient of the terms: lam_new = d terms / dg
+    eps, dG = 1e-6, np.zeros_like(G)
+    dG[0, 0] = eps
+    lam_new = al.update(S, G, GN, LAM, LAMN, rho, np.inf)[0]
+    slope = (al.terms(G + dG, GN, LAM, LAMN, rho) - al.terms(G - dG, GN, LAM, LAMN, rho)) / (2 * eps)
+    assert lam_new[0, 0] == pytest.approx(slope, rel=1e-6)
+
+
+def test_each_row_gets_the_penalty_its_own_violation_needs():
+    rho = np.full(3, 1e4)
+    viol = al.row_violation(G, GN)
+    np.testing.assert_array_equal(viol, [0.2, 0.1, 0.05])  # the rows' largest violations over the knots
+    f = S.penalty_factor
+    # rows 0 and 2 stalled, row 1 fell to a tenth: only the stalled rows' penalties grow
+    prev = np.array([0.21, 1.0, 0.06])
+    np.testing.assert_allclose(al.update(S, G, GN, LAM, LAMN, rho, prev)[2], [1e4 * f, 1e4, 1e4 * f])
+    # fast progress (below 1 %) lowers a row's penalty, never below penalty_init
+    low = np.array([1e4, S.penalty_init, 1e4])
+    np.testing.assert_allclose(al.update(S, G, GN, LAM, LAMN, low, 1e3 * viol)[2],
+                               [1e4 / f ** 0.5, S.penalty_init, 1e4 / f ** 0.5])
+    # a satisfied row's penalty never grows; a warm start's first update (no previous violation) keeps all
+    G_ok = np.minimum(G, 0.0)
+    assert al.update(S, G_ok, GN, LAM, LAMN, rho, np.full(3, 0.0))[2][:2].tolist() == [1e4, 1e4]
+    np.testing.assert_array_equal(al.update(S, G, GN, LAM, LAMN, rho, np.full(3, np.inf))[2], rho)
+
+
+def test_infeasibility_needs_converged_inner_loops():
+    growth = S.infeasibility_growth
+    converged = [al.Update(100.0, 1.0, True), al.Update(100.0 * growth, 0.9, True)]
+    assert al.stalled(S, converged)
+    assert not al.stalled(S, [converged[0], al.Update(100.0 * growth, 0.9, False)])  # the last one unconverged
+    assert not al.stalled(S, [al.Update(100.0, 1.0, False), converged[1]])  # no converged earlier evidence
+    assert not al.stalled(S, [converged[0], al.Update(100.0 * growth, 0.4, True)])  # halved: progress
+    cert = al.certificate(S, (["a", "b"], ["end"]), G, GN, [converged[0], al.Update(1e3, 2.0, False), converged[1]])
+    assert al.Update.at(S, G, np.array([-1.0]), np.array([1.0, 7.0, 99.0]), True).penalty == 7.0  # violated rows
+    assert cert == {"penalty": [100.0, 100.0 * growth], "violation": [1.0, 0.9], "constraints": ["a", "b", "end"]}
+
+
+def test_flat_rule_never_accepts_a_large_gradient():
+    """A predicted decrease below rounding with |Qu| above flat_stationarity is no convergence: the toy is
+    stopped at its first iterate by a huge decrement tolerance and must not report converged."""
+    from thermo_ddp.solvers import DDPSolver
+    from thermo_ddp.testing.thermal_pendulum import thermal_pendulum, x0_of
+
+    problem, goal = thermal_pendulum(t_max=50.0), np.full((101, 1), 2.0)
+    flat = DDPSolver(problem, {"backend": "casadi", "decrement_tolerance": 1e6, "max_iterations": 5}).solve(x0_of(),
+                                                                                                           goal)
+    assert not flat.success
+    assert flat.kkt["stationarity"] > DDPSettings().flat_stationarity * (1 + abs(flat.cost))
