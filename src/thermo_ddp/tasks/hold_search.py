@@ -114,12 +114,15 @@ def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     return lo
 
 
-def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int) -> HoldSearch:
+def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int,
+                          stop_without_verdict: bool = True) -> HoldSearch:
     """The longest hold, up to the requested one (the fixed horizon), with a feasible plan.
 
     ``solve(problem, warm_start)`` gives a probe's :class:`Outcome`; the first probe holds ``first_knots``.
     Every verdict is a complete optimisation, warm-started from the nearest solved probe's trajectories; a
-    probe without a verdict stops the search."""
+    probe without a verdict stops the search (``failed``), or with ``stop_without_verdict`` off (a controller
+    that needs some verified plan) counts as not feasible: the search goes on to shorter holds, and the result
+    is then the longest hold verified feasible, not a verdict on longer ones."""
     probes: dict[int, tuple[object, Outcome]] = {}
     top = lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
@@ -132,7 +135,7 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         probes[knots] = (probe, solve(probe, warm))
         outcome = probes[knots][1]
         log.info("hold %.1f s: %s", probe.hold_s, outcome.verdict or "no verdict")
-        if outcome.verdict is None:
+        if outcome.verdict is None and stop_without_verdict:
             return HoldSearch(lo, probes, failed=knots)
         lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
         same_side = outcome.verdict == last and (outcome.feasible or len(probes) > 2)
