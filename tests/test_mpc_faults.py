@@ -149,8 +149,10 @@ def test_robustness_sweep_has_no_violation():
 
 def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back():
     """A plant that runs hotter than planned (winding-casing resistance +11 %, less capacity, warm start): with
-    the back-off band hard, re-solves near the limit fail and the fallback applies open-loop current while
-    lowering; with the band soft (the default), nearly every period is planned and the true limit holds."""
+    the back-off band hard the plan must shorten the hold further (6.0 s against 6.7 s soft; before the DDP's
+    per-constraint penalties, issue 23, its re-solves near the limit failed instead: >= 10 fallbacks, open-loop
+    current while lowering); with the band soft (the default), nearly every period is planned and the true limit
+    holds."""
     from thermo_ddp.studies.sweep import CONTROLLER, OBSERVER
 
     draw = dict(plant_thermal_scales=(("winding_capacity_j_per_k", 0.956), ("casing_capacity_j_per_k", 0.857),
@@ -163,9 +165,9 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
         results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
     hard, soft = results[0.0], results[1e4]
     fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
-    assert fallbacks[0.0] >= 10, hard.message            # the scenario does stress the hard band
+    assert hard.hold_s[-1] < soft.hold_s[-1], hard.message  # the scenario does stress the hard band
     assert fallbacks[1e4] <= fallbacks[0.0] / 10, fallbacks
-    assert soft.success and soft.margin_c > 0 and soft.hold_s[-1] >= hard.hold_s[-1]
+    assert soft.success and soft.margin_c > 0
 
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant():

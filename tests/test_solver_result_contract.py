@@ -77,9 +77,17 @@ def test_a_solve_stopped_early_is_failed_never_infeasible():
 
 
 def test_summary_carries_status_reason_and_kkt(active):
+    import json
+    import pickle
+
     summary = active[2].summary()
     assert summary["status"] == "converged" and summary["reason"] == ""
     assert set(summary["kkt"]) == {"stationarity", "primal", "complementarity"}
+    json.dumps(summary)
+    # the residuals are evaluated on first access; a pickled result (a sweep's worker) carries them as a dict
+    for result in active[1:]:
+        copy = pickle.loads(pickle.dumps(result))
+        assert type(copy.kkt) is dict and copy.kkt == dict(result.kkt)
 
 
 def test_the_contract_is_enforced():

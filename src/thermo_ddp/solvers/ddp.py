@@ -80,7 +80,7 @@ from . import _augmented_lagrangian as al
 from ._backends import make_backend
 from ._layout import Layout
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
-from .result import HISTORY_KEYS, STATUSES, SolverResult, WarmStart, constraint_violation
+from .result import HISTORY_KEYS, STATUSES, LazyKKT, SolverResult, WarmStart, constraint_violation
 
 log = logging.getLogger(__name__)
 
@@ -509,7 +509,8 @@ class DDPSolver:
             certificate = al.certificate(self.settings, self._rows, it_.G, it_.GN, al_log)
         kkt = dict.fromkeys(KKT_KEYS, float("inf"))
         if finite:  # x_0 is x0 on every DDP iterate (set before the first pass, kept by the rollouts)
-            kkt = self.kkt.residuals(it_.X, it_.U, P, lam, lamN, it_.X[0])
+            X, U, P = it_.X.copy(), it_.U.copy(), P.copy()
+            kkt = LazyKKT(lambda: self.kkt.residuals(X, U, P, lam, lamN, X[0]))
         log.info("DDP %s after %d iterations: cost %.8g, violation %.2e, %.3f ms", reason or status, iterations,
                  it_.J, viol, 1e3 * solve_s)
         return SolverResult(solver=f"ddp[{self.backend.name}]", success=status == "converged",

