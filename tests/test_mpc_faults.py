@@ -165,7 +165,9 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
         results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
     hard, soft = results[0.0], results[1e4]
     fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
-    assert hard.hold_s[-1] < soft.hold_s[-1], hard.message  # the scenario does stress the hard band
+    # the scenario does stress the hard band: a shorter hold, or (when the start's hold search verifies the full
+    # hold through a regularised restart, tasks/attempts.py) re-solves that fail near the limit
+    assert hard.hold_s[-1] < soft.hold_s[-1] or fallbacks[0.0] >= 10, (hard.message, fallbacks)
     assert fallbacks[1e4] <= fallbacks[0.0] / 10, fallbacks
     assert soft.success and soft.margin_c > 0
 

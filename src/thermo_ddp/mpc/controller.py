@@ -23,7 +23,7 @@ import logging
 import casadi as ca
 import numpy as np
 
-from ..tasks.attempts import solve_until_verdict
+from ..tasks.attempts import SolverLadder
 from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
@@ -184,11 +184,13 @@ class RecedingHorizonController:
             result = self.solver.solve(lp.x0, self.window(0), initial_guess(lp.with_hold(self.hold_s)))
             total, iterations, solves = total + result.solve_s, iterations + result.iterations, solves + 1
         if not self._acceptable(result, False) and self.hold_knots > 0:
-            def probe(task, warm):  # DDP alone: a real-time loop does not fall back to IPOPT
-                return solve_until_verdict([("ddp", lambda: self.solver.solve(task.x0, task.params,
-                                                                               warm or initial_guess(task)))])
+            ladder = SolverLadder(lp.problem, self.solver)
+
+            def probe(task, warm):  # DDP and its restarts: a real-time loop does not fall back to IPOPT
+                return ladder.solve(task, warm or initial_guess(task), reference=False)
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
-            search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s))
+            search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s),
+                                           stop_without_verdict=False)
             solves, total = solves + len(search.results), total + search.solve_s
             if search.knots >= 0 and search.failed is None:
                 best_lp, best = search.best[0], search.best[1].result

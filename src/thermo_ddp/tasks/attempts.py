@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from ..ocp import OptimalControlProblem
-from ..solvers import DDPSettings, DDPSolver, IpoptSolver, SolverResult, WarmStart
+from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from .problem import TaskProblem
 from .verdicts import verdict
 
@@ -87,14 +87,17 @@ class SolverLadder:
     def reference(self) -> IpoptSolver:
         return IpoptSolver(self.problem)
 
-    def solve(self, tp: TaskProblem, guess: WarmStart) -> Outcome:
-        """The ladder on ``tp`` from ``guess``: DDP's four steps, or a reference solver from two guesses."""
+    def solve(self, tp: TaskProblem, guess: WarmStart, reference: bool = True) -> Outcome:
+        """The ladder on ``tp`` from ``guess``: DDP's four steps (the last, IPOPT, unless ``reference`` is off:
+        e.g. in a real-time loop), or a reference solver from two guesses."""
         x0, p, first = tp.x0, tp.params, self.primary
-        if not isinstance(first, DDPSolver):
-            return solve_until_verdict(((first.plugin, lambda: first.solve(x0, p, guess)),
-                                        (f"{first.plugin} from rest", lambda: first.solve(x0, p, rest_guess(tp)))))
-        return solve_until_verdict((
-            ("ddp", lambda: first.solve(x0, p, guess)),
-            ("ddp regularised restart", lambda: self.restart.solve(x0, p, WarmStart(guess.xs, guess.us))),
-            ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp))),
-            ("ipopt", lambda: self.reference.solve(x0, p, WarmStart(guess.xs, guess.us)))))
+        if not isinstance(first, DDPSolver):  # a reference solver, or a wrapper of one (e.g. a fault injector)
+            name = first.plugin if isinstance(first, (IpoptSolver, FatropSolver)) else type(first).__name__
+            return solve_until_verdict(((name, lambda: first.solve(x0, p, guess)),
+                                        (f"{name} from rest", lambda: first.solve(x0, p, rest_guess(tp)))))
+        rungs = [("ddp", lambda: first.solve(x0, p, guess)),
+                 ("ddp regularised restart", lambda: self.restart.solve(x0, p, WarmStart(guess.xs, guess.us))),
+                 ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp)))]
+        if reference:
+            rungs.append(("ipopt", lambda: self.reference.solve(x0, p, WarmStart(guess.xs, guess.us))))
+        return solve_until_verdict(rungs)

@@ -21,7 +21,8 @@ import numpy as np
 
 from ..solvers import SolverResult, WarmStart
 from .attempts import Outcome
-from .thermal_hold import thermal_trajectory, winding_indices
+from .thermal_hold import thermal_trajectory, time_to_limit_by_joint, winding_indices
+from .verdicts import binding_constraints, cause_class, deciding_constraints
 
 log = logging.getLogger(__name__)
 GUIDED_PROBES = 5   # probes placed by the prediction (galloping when it misses twice); bisection after them
@@ -64,6 +65,27 @@ def _peak_winding(lp, current: np.ndarray, speed: np.ndarray) -> float:
     return float(temps[:, winding_indices(lp.model)].max())
 
 
+def _thermal(probe, result: SolverResult) -> bool:
+    """A thermal constraint among those that decide an infeasible probe (violated, or at its bound)."""
+    names = deciding_constraints(probe, result, violated=True)
+    names += [k for k in binding_constraints(probe, result) if k not in names]
+    return any(cause_class(k) == "thermal" for k in names)
+
+
+def _at_limit(lp, result: SolverResult, margin_c: float = 0.5) -> bool:
+    return float(result.xs[:, [lp.model.index(j, "winding_c") for j in lp.model.joints]].max()) >= (
+        lp.settings.limit_c - margin_c)
+
+
+def _arrival_knots(lp, probe, result: SolverResult) -> int:
+    """Knots of holding the least current of the band, from ``result``'s state on arrival, until the limit."""
+    held, joint = _replay(lp, (probe, result))[4], lp.model.joints[0]
+    horizon = (lp.hold_knots[1] - lp.hold_knots[0] + 1) * lp.settings.dt_s
+    ttl = time_to_limit_by_joint(lp.model, held, result.xs[probe.hold_knots[0], 2 * lp.model.nu:],
+                                 {joint: lp.settings.limit_c}, horizon, lp.settings.dt_s)[joint]
+    return int(min(ttl, horizon) / lp.settings.dt_s)
+
+
 def predicted_peak_winding_c(lp, plan: tuple[object, SolverResult], knots: int) -> float:
     """The winding's peak replaying ``plan``'s currents (its problem and result) with a hold of ``knots``."""
     current, speed, first, hold, held = _replay(lp, plan)
@@ -92,12 +114,15 @@ def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     return lo
 
 
-def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int) -> HoldSearch:
+def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int,
+                          stop_without_verdict: bool = True) -> HoldSearch:
     """The longest hold, up to the requested one (the fixed horizon), with a feasible plan.
 
     ``solve(problem, warm_start)`` gives a probe's :class:`Outcome`; the first probe holds ``first_knots``.
     Every verdict is a complete optimisation, warm-started from the nearest solved probe's trajectories; a
-    probe without a verdict stops the search."""
+    probe without a verdict stops the search (``failed``), or with ``stop_without_verdict`` off (a controller
+    that needs some verified plan) counts as not feasible: the search goes on to shorter holds, and the result
+    is then the longest hold verified feasible, not a verdict on longer ones."""
     probes: dict[int, tuple[object, Outcome]] = {}
     top = lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
@@ -110,14 +135,19 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         probes[knots] = (probe, solve(probe, warm))
         outcome = probes[knots][1]
         log.info("hold %.1f s: %s", probe.hold_s, outcome.verdict or "no verdict")
-        if outcome.verdict is None:
+        if outcome.verdict is None and stop_without_verdict:
             return HoldSearch(lo, probes, failed=knots)
         lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
-        step = 2 * step if outcome.verdict == last and len(probes) > 2 else 1   # the same side again: gallop
+        same_side = outcome.verdict == last and (outcome.feasible or len(probes) > 2)
+        step = 2 * step if same_side else 1   # the same side again: gallop
         last = outcome.verdict
         predicted = predicted_hold_knots(lp, (probe, outcome.result))
-        if not outcome.feasible and predicted >= knots:
-            guess = 0  # the heat allows this hold, so a shorter one will not help: try touching the goal at once
+        if outcome.feasible and not _at_limit(lp, outcome.result):
+            # a plan short of the limit heats more on its lift and lowering than one at the boundary, so its replay
+            # is short: take the time to the limit from its arrival (long: the lowering's heat aside) when longer
+            predicted = max(predicted, _arrival_knots(lp, probe, outcome.result))
+        if not outcome.feasible and predicted >= knots and not _thermal(probe, outcome.result):
+            guess = 0  # the heat neither decides nor binds: a shorter hold will not help, try touching the goal
         else:
             # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering
             # still give way a little)
