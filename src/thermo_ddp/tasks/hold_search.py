@@ -81,7 +81,8 @@ def _arrival_knots(lp, probe, result: SolverResult) -> int:
     """Knots of holding the least current of the band, from ``result``'s state on arrival, until the limit."""
     held, joint = _replay(lp, (probe, result))[4], lp.model.joints[0]
     horizon = (lp.hold_knots[1] - lp.hold_knots[0] + 1) * lp.settings.dt_s
-    ttl = time_to_limit_by_joint(lp.model, held, result.xs[probe.hold_knots[0], 2 * lp.model.nu:],
+    # the model's own thermal state (a robust problem's first scenario: its later scenarios follow it in x)
+    ttl = time_to_limit_by_joint(lp.model, held, result.xs[probe.hold_knots[0], 2 * lp.model.nu:lp.model.nx],
                                  {joint: lp.settings.limit_c}, horizon, lp.settings.dt_s)[joint]
     return int(min(ttl, horizon) / lp.settings.dt_s)
 
