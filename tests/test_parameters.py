@@ -104,8 +104,10 @@ def test_impossible_value_is_refused_naming_file_key_and_value(tmp_path, elbow_f
 
 
 def test_every_catalogue_key_has_a_bound_with_a_reason():
+    from thermo_ddp.model.catalogue import NETWORK_KEYS
     from thermo_ddp.model.parameters import (BOUNDS, LIMIT_KEYS, MOTOR_KEYS, THERMAL_KEYS, THERMAL_OPTIONAL)
-    keys = {*MOTOR_KEYS, *LIMIT_KEYS, "ambient_c", *THERMAL_OPTIONAL, *(k for ks in THERMAL_KEYS.values() for k in ks)}
+    keys = {*MOTOR_KEYS, *LIMIT_KEYS, "ambient_c", *THERMAL_OPTIONAL, *NETWORK_KEYS,
+            *(k for ks in THERMAL_KEYS.values() for k in ks)}
     assert keys == set(BOUNDS)
     assert all(b.low < b.high and b.reason for b in BOUNDS.values())
     assert all(BOUNDS[k].low <= v <= BOUNDS[k].high for k, v in THERMAL_OPTIONAL.items())

@@ -157,4 +157,4 @@ def test_identification_sees_the_files_optional_heat(elbow_file):
     p = _with_thermal(elbow_file, TWO_NODE | {"friction_heat_linear_w_s_per_rad": 0.7, "friction_heat_node": "casing"})
     fit_net = ThermalModel(p, ("casing_node",)).network
     assert fit_net.sources == network_from_parameters(p.thermal).sources
-    assert HeatSource("casing", "speed_abs_rad_s", 0.7) in fit_net.sources
+    assert HeatSource("casing", "speed_abs_rad_s", 0.7, kind="friction_heating") in fit_net.sources

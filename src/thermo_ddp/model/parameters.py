@@ -5,116 +5,19 @@ The file format is a contract (docs/architecture.md): SI units, the unit in each
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 import tomli_w
 
 from ..errors import InputError
-
-THERMAL_MODELS = ("one_node", "two_node", "two_node_drive")
-
-# --- the key catalogue: every motor, thermal and limit key of the contract, with its check ----------
-@dataclass(frozen=True)
-class Bound:
-    """Physically possible values of one key: ``low <= x <= high`` in ``unit``, and why.
-
-    The sign rule follows ``low``: > 0 keys (``low > 0``) refuse zero, >= 0 keys (``low == 0``) refuse
-    negatives, temperatures (``low < 0``) only the range."""
-
-    low: float
-    high: float
-    unit: str
-    reason: str
-
-    def check(self, source: str, name: str, value: Any, what: str = "physically impossible") -> float:
-        """``value`` as a finite float of the right sign within the bound (numpy scalars accepted);
-        InputError naming ``source``, ``name``, the value, the range, its unit and ``reason`` otherwise."""
-        x = _number(source, name, value)
-        unit = f" {self.unit}" if self.unit else ""
-        if self.low > 0 and x <= 0:
-            raise InputError(source, name, x, f"must be > 0{unit}")
-        if self.low == 0 and x < 0:
-            raise InputError(source, name, x, f"must be >= 0{unit}")
-        if not self.low <= x <= self.high:
-            raise InputError(source, name, x, f"{what}: expected {self.low:g} to {self.high:g}{unit} ({self.reason})")
-        return x
-
-
-_RESISTANCE_K_PER_W = Bound(1e-4, 1e4, "K/W", "a liquid-cooled housing ~0.01, a tiny part in still air ~1000")
-_CAPACITY_J_PER_K = Bound(1e-3, 1e7, "J/K", "a milligram of copper to ten tonnes of steel")
-_HEAT_W = Bound(0.0, 1e5, "W", "heat is non-negative; 100 kW is beyond any joint motor")
-_CELSIUS = Bound(-50.0, 80.0, "°C", "contract: rooms and machines between -50 and 80 °C")
-_HOT_CELSIUS = Bound(-50.0, 400.0, "°C", "above ambient; no winding insulation survives 400 °C")
-
-BOUNDS: dict[str, Bound] = {
-    # [motor]
-    "gear_ratio": Bound(0.01, 1e4, "", "direct drive is 1, strain-wave gears ~160, worm stages ~1e3"),
-    "torque_constant_nm_per_a": Bound(1e-4, 100.0, "N·m/A", "micro motors ~1e-3, large torque motors ~10"),
-    "back_emf_v_s_per_rad": Bound(1e-4, 100.0, "V·s/rad", "equals the torque constant in SI units"),
-    "resistance_ohm": Bound(1e-4, 1e3, "ohm", "large motors ~1 mohm, micro motors ~100 ohm"),
-    "resistance_ref_c": Bound(-50.0, 200.0, "°C", "datasheets quote 20-25 °C"),
-    "copper_alpha_per_k": Bound(0.0, 0.02, "1/K", "copper 0.00393, no conductor above 0.007; 0 disables R(T)"),
-    "rotor_inertia_kg_m2": Bound(1e-10, 1.0, "kg·m^2", "micro rotors ~1e-8, large servo rotors ~1e-2"),
-    "viscous_friction_nm_s_per_rad": Bound(0.0, 1e4, "N·m·s/rad", "dissipative: non-negative"),
-    "coulomb_friction_nm": Bound(0.0, 1e4, "N·m", "dissipative: non-negative"),
-    "coulomb_smoothing_rad_s": Bound(1e-6, 10.0, "rad/s", "a smoothing of sign(v), well below joint speeds"),
-    "bus_voltage_v": Bound(1.0, 1e4, "V", "from single cells to industrial drives"),
-    "current_nominal_a": Bound(1e-4, 1e4, "A", "micro motors ~10 mA, traction motors ~1 kA"),
-    "current_peak_a": Bound(1e-4, 1e4, "A", "micro motors ~10 mA, traction motors ~1 kA"),
-    # [thermal]
-    "ambient_c": _CELSIUS,
-    "capacity_j_per_k": _CAPACITY_J_PER_K, "winding_capacity_j_per_k": _CAPACITY_J_PER_K,
-    "casing_capacity_j_per_k": _CAPACITY_J_PER_K, "drive_capacity_j_per_k": _CAPACITY_J_PER_K,
-    "resistance_k_per_w": _RESISTANCE_K_PER_W, "winding_casing_k_per_w": _RESISTANCE_K_PER_W,
-    "casing_ambient_k_per_w": _RESISTANCE_K_PER_W, "drive_casing_k_per_w": _RESISTANCE_K_PER_W,
-    "drive_ambient_k_per_w": _RESISTANCE_K_PER_W,
-    "drive_idle_w": _HEAT_W,
-    "drive_loss_w_per_a2": Bound(0.0, 100.0, "W/A^2", "a resistance of the drive: non-negative, < 100 ohm"),
-    "friction_heating_fraction": Bound(0.0, 1.0, "", "a share of the friction power"),
-    "friction_heat_linear_w_s_per_rad": Bound(0.0, 1e5, "W·s/rad", "heat is non-negative"),
-    "friction_heat_quadratic_w_s2_per_rad2": Bound(0.0, 1e5, "W·s^2/rad^2", "heat is non-negative"),
-    "iron_loss_w": _HEAT_W,
-    "iron_loss_ref_speed_rad_s": Bound(1e-3, 1e4, "rad/s", "a joint speed"),
-    "iron_loss_speed_exponent": Bound(1.0, 3.0, "", "hysteresis ~ speed (1), eddy currents ~ speed^2 (2)"),
-    # [limits]
-    "winding_max_c": _HOT_CELSIUS,
-    "safety_cutoff_c": _HOT_CELSIUS,
-}
-
-THERMAL_KEYS: dict[str, tuple[str, ...]] = {
-    "one_node": ("capacity_j_per_k", "resistance_k_per_w"),
-    "two_node": ("winding_capacity_j_per_k", "casing_capacity_j_per_k",
-                 "winding_casing_k_per_w", "casing_ambient_k_per_w"),
-}
-THERMAL_KEYS["two_node_drive"] = THERMAL_KEYS["two_node"] + (
-    "drive_capacity_j_per_k", "drive_casing_k_per_w", "drive_ambient_k_per_w",
-    "drive_idle_w", "drive_loss_w_per_a2")
-# Optional numeric [thermal] keys, valid with any model, and their defaults (contract, plus the
-# pre-contract ``friction_heating_fraction``). A model's own key is required, not optional.
-THERMAL_OPTIONAL: dict[str, float] = {
-    "friction_heating_fraction": 0.0,
-    "friction_heat_linear_w_s_per_rad": 0.0, "friction_heat_quadratic_w_s2_per_rad2": 0.0,
-    "iron_loss_w": 0.0, "iron_loss_ref_speed_rad_s": 1.0, "iron_loss_speed_exponent": 2.0,
-    "drive_idle_w": 0.0, "drive_loss_w_per_a2": 0.0,
-}
-# Optional node choices of [thermal]: key -> (allowed nodes, default).
-THERMAL_NODE_CHOICES: dict[str, tuple[tuple[str, ...], str]] = {
-    "sensor": (("casing", "winding"), "casing"),
-    "friction_heat_node": (("winding", "casing"), "winding"),
-}
-
-
-def unit(key: str) -> str:
-    """The unit of a catalogue key (``"J/K"`` for ``casing_capacity_j_per_k``)."""
-    return BOUNDS[key].unit
-
+from .catalogue import (BOUNDS, HEAT_SOURCE_KINDS, NETWORK_MODEL, SOURCE_KINDS, THERMAL_KEYS, THERMAL_MODELS,  # noqa: F401
+                        THERMAL_NODE_CHOICES, THERMAL_OPTIONAL, Bound, checked_value, unit)
+from .network_spec import NetworkSpec, general_network, read_network
+from .scope import Scope, read_alternatives, read_envelope, read_hardware, read_uncertainty
 
 @dataclass(frozen=True)
 class MotorParameters:
@@ -142,18 +45,23 @@ class MotorParameters:
 
 @dataclass(frozen=True)
 class ThermalParameters:
-    """Lumped thermal network parameters: ``values`` holds the model's keys (:data:`THERMAL_KEYS`) and
-    the optional ones given (:data:`THERMAL_OPTIONAL`; absent ones read as their defaults); values may
-    be CasADi symbols (identification). ``sensor`` and ``friction_heat_node`` are the optional node
-    choices (None: absent, see :data:`THERMAL_NODE_CHOICES`)."""
+    """Lumped thermal network parameters.  A legacy model (``one_node``, ``two_node``, ``two_node_drive``):
+    ``values`` holds the model's keys (:data:`THERMAL_KEYS`) and the optional ones given
+    (:data:`THERMAL_OPTIONAL`; absent ones read as their defaults), ``sensor`` and ``friction_heat_node``
+    the optional node choices (None: absent, see :data:`THERMAL_NODE_CHOICES`).  A general network
+    (``model = "network"``): ``network`` holds nodes, links and sources, ``sensor`` names a node.
+    Values may be CasADi symbols (identification)."""
 
     model: str
     ambient_c: float
-    values: Mapping[str, float]
+    values: Mapping[str, float] = field(default_factory=dict)
     sensor: str | None = None
     friction_heat_node: str | None = None
+    network: NetworkSpec | None = None
 
     def __getitem__(self, key: str) -> float:
+        if self.network is not None:
+            raise KeyError(f"{key}: a general network has no legacy [thermal] keys (see paths())")
         if key in self.values:
             return self.values[key]
         return THERMAL_OPTIONAL[key]
@@ -168,10 +76,33 @@ class ThermalParameters:
         """Where the contract's friction heat enters: ``friction_heat_node``, by default the winding."""
         return self.friction_heat_node or THERMAL_NODE_CHOICES["friction_heat_node"][1]
 
+    @property
+    def general(self) -> NetworkSpec:
+        """The network in the general form (a legacy model through :func:`general_network`)."""
+        return self.network if self.network is not None else general_network(self)
+
+    def paths(self) -> dict[str, object]:
+        """Every value of the section by its dotted path below ``thermal.``."""
+        inner = self.network.paths() if self.network is not None else dict(self.values)
+        return {"ambient_c": self.ambient_c, **inner}
+
+    def with_values(self, values: Mapping[str, object]) -> "ThermalParameters":
+        """A copy with the values at dotted paths below ``thermal.`` replaced, unchecked (symbols allowed):
+        a legacy model's keys, or a network's paths (:meth:`NetworkSpec.with_values`)."""
+        values = dict(values)
+        ambient = values.pop("ambient_c", self.ambient_c)
+        if self.network is not None:
+            return dataclasses.replace(self, ambient_c=ambient, network=self.network.with_values(values))
+        for key in values:
+            if key not in THERMAL_KEYS[self.model] and key not in THERMAL_OPTIONAL:
+                raise KeyError(key)
+        return dataclasses.replace(self, ambient_c=ambient, values={**self.values, **values})
+
     def to_dict(self) -> dict[str, Any]:
-        """The [thermal] section: model, ambient, the node choices and values given."""
+        """The [thermal] section: model, ambient, the node choices and values given (or the network)."""
         choices = {k: getattr(self, k) for k in THERMAL_NODE_CHOICES if getattr(self, k) is not None}
-        return {"model": self.model, "ambient_c": self.ambient_c, **choices, **self.values}
+        inner = self.network.to_dict() if self.network is not None else self.values
+        return {"model": self.model, "ambient_c": self.ambient_c, **choices, **inner}
 
 
 @dataclass(frozen=True)
@@ -182,11 +113,13 @@ class Limits:
 
 MOTOR_KEYS = tuple(f.name for f in dataclasses.fields(MotorParameters))
 LIMIT_KEYS = tuple(f.name for f in dataclasses.fields(Limits))
+_PLAIN_SECTIONS = {"motor": MOTOR_KEYS, "limits": LIMIT_KEYS}
 
 
 @dataclass(frozen=True)
 class JointParameters:
-    """One parameter file: the joint's motor, thermal network, limits and sources."""
+    """One parameter file: the joint's motor, thermal network, limits and sources, and its scope (what
+    the motor can have, the uncertainty of its values, where they hold, alternatives: :class:`Scope`)."""
 
     joint: str
     motor: MotorParameters
@@ -194,6 +127,7 @@ class JointParameters:
     limits: Limits
     sources: Mapping[str, str] = field(default_factory=dict)
     path: str = "<memory>"
+    scope: Scope = field(default_factory=Scope)
 
     def to_dict(self) -> dict[str, Any]:
         """The file's sections as used (plan JSON ``model.motors[joint]``)."""
@@ -203,7 +137,48 @@ class JointParameters:
             "thermal": self.thermal.to_dict(),
             "limits": dataclasses.asdict(self.limits),
             "sources": dict(self.sources),
+            **self.scope.to_dict(),
         }
+
+    def paths(self) -> dict[str, object]:
+        """Every value of the file by its dotted path (``motor.resistance_ohm``, ``thermal.<...>``, ``limits.<...>``)."""
+        out = {f"{section}.{k}": getattr(getattr(self, section), k) for section, keys in _PLAIN_SECTIONS.items()
+               for k in keys}
+        return out | {f"thermal.{k}": v for k, v in self.thermal.paths().items()}
+
+    def value(self, path: str):
+        """The value at a dotted path; KeyError when the file has none there."""
+        section, _, tail = path.partition(".")
+        if section == "thermal" and self.thermal.network is not None and tail != "ambient_c":
+            return self.thermal.network.value(tail)
+        return self.paths()[path]
+
+    def with_values(self, values: Mapping[str, object]) -> "JointParameters":
+        """A copy with the values at dotted paths replaced, unchecked (CasADi symbols allowed: identification
+        differentiates the same expressions); :meth:`checked` validates a numeric result.  KeyError names
+        a path that fits nothing."""
+        thermal = {p[len("thermal."):]: v for p, v in values.items() if p.startswith("thermal.")}
+        out = dataclasses.replace(self, thermal=self.thermal.with_values(thermal) if thermal else self.thermal)
+        for section, keys in _PLAIN_SECTIONS.items():
+            given = {p.split(".", 1)[1]: v for p, v in values.items() if p.split(".", 1)[0] == section}
+            for key in given:
+                if key not in keys:
+                    raise KeyError(f"{section}.{key}")
+            if given:
+                out = dataclasses.replace(out, **{section: dataclasses.replace(getattr(out, section), **given)})
+        rest = [p for p in values if p.split(".", 1)[0] not in ("thermal", *_PLAIN_SECTIONS)]
+        if rest:
+            raise KeyError(rest[0])
+        return out
+
+    def checked(self, source: str | None = None) -> "JointParameters":
+        """This file validated as if read (InputError naming ``source``, by default its path)."""
+        return dataclasses.replace(parameters_from_dict(self.to_dict(), source or self.path), path=self.path)
+
+    def alternative(self, index: int) -> "JointParameters":
+        """The file with alternative ``index``'s values (validated when the file was read); no alternatives."""
+        alt = self.scope.alternatives[index]
+        return dataclasses.replace(self.with_values(alt.values), scope=dataclasses.replace(self.scope, alternatives=()))
 
     def replace(self, section: str, **values: float) -> "JointParameters":
         """A copy with some values of ``motor``, ``thermal`` or ``limits`` replaced (validated)."""
@@ -214,21 +189,6 @@ class JointParameters:
             raise InputError(self.path, f"{section}.{unknown[0]}", values[unknown[0]], "unknown key")
         data[section].update(values)
         return parameters_from_dict(data, self.path)
-
-
-def _number(source: str, key: str, value: Any) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise InputError(source, key, repr(value), "expected a number in the SI unit named by the key")
-    value = float(value)
-    if not math.isfinite(value):
-        raise InputError(source, key, value, "expected a finite number")
-    return value
-
-
-def checked_value(source: str, name: str, key: str, value: Any) -> float:
-    """``value`` of catalogue ``key`` (shown as ``name``) as a finite number of the right sign within
-    the key's :data:`BOUNDS`; InputError otherwise."""
-    return BOUNDS[key].check(source, name, value)
 
 
 def _above_ambient(source: str, key: str, value: float, ambient_c: float) -> None:
@@ -272,16 +232,64 @@ def _node_choice(source: str, sec: Mapping[str, Any], key: str, model: str) -> s
 
 def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
     model = sec.get("model", "<missing>")
-    if model not in THERMAL_MODELS:
-        raise InputError(source, "thermal.model", repr(model), f"expected one of {', '.join(THERMAL_MODELS)}")
+    if model not in (*THERMAL_MODELS, NETWORK_MODEL):
+        raise InputError(source, "thermal.model", repr(model), f"expected one of {', '.join(THERMAL_MODELS)}, {NETWORK_MODEL}")
     if "ambient_c" not in sec:
         raise InputError(source, "thermal.ambient_c", "<missing>", "required key missing")
     ambient = checked_value(source, "thermal.ambient_c", "ambient_c", sec["ambient_c"])
+    if model == NETWORK_MODEL:
+        return _network_thermal(source, sec, ambient)
     required = THERMAL_KEYS[model]
     optional = tuple(k for k in THERMAL_OPTIONAL if k not in required)
     values = _read_keys(source, sec, "thermal", required, optional,
                         ignore=("model", "ambient_c", *THERMAL_NODE_CHOICES))
     return ThermalParameters(model, ambient, values, *(_node_choice(source, sec, k, model) for k in THERMAL_NODE_CHOICES))
+
+
+def _network_thermal(source: str, sec: Mapping[str, Any], ambient_c: float) -> ThermalParameters:
+    """A ``model = "network"`` section: its tables (:func:`read_network`) and the ``sensor`` node (required)."""
+    for key in sec:
+        if key not in ("model", "ambient_c", "sensor", "node", "link", "source"):
+            raise InputError(source, f"thermal.{key}", sec[key], "unknown key of a network (its heat is in "
+                             "[[thermal.source]], its nodes in [[thermal.node]], its links in [[thermal.link]])")
+    network = read_network(source, sec)
+    sensor = sec.get("sensor", "<missing>")
+    if sensor not in network.node_names:
+        raise InputError(source, "thermal.sensor", repr(sensor), "name the node the recording's temperature_c "
+                         f"measures, one of {', '.join(network.node_names)}")
+    return ThermalParameters(NETWORK_MODEL, ambient_c, {}, sensor, network=network)
+
+
+def _sources_text(source: str, data: Mapping[str, Any]) -> dict[str, str]:
+    sources = data.get("sources", {})
+    if not isinstance(sources, Mapping):
+        raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
+    for key, text in sources.items():
+        if not isinstance(text, str):
+            raise InputError(source, f"sources.{key}", repr(text), "expected \"free text\": where the value comes from")
+    return dict(sources)
+
+
+def _scope(source: str, data: Mapping[str, Any], core: JointParameters) -> Scope:
+    """[hardware] (every heat source of the network must be allowed), [uncertainty], [envelope],
+    [[alternatives]] (each, applied to the file, must give a valid file of this motor)."""
+    hardware = read_hardware(source, data)
+    allowed = Scope(hardware).allowed_sources
+    for src in core.thermal.general.sources:
+        if src.kind not in allowed:
+            raise InputError(source, "hardware.heat_sources", repr(list(allowed)), f"the [thermal] section has "
+                             f"{src.kind} heat ({src.label}), which this list says the motor cannot have")
+    scoped = dataclasses.replace(core, scope=Scope(hardware))
+
+    def check(where: str, values: Mapping[str, float]) -> None:
+        try:
+            candidate = scoped.with_values(values)
+        except KeyError as err:
+            raise InputError(source, where, err.args[0], "names no value this file can hold") from None
+        candidate.checked(f"{source} {where}")
+
+    return Scope(hardware, read_uncertainty(source, data, core.value), read_envelope(source, data),
+                 read_alternatives(source, data, check))
 
 
 def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> JointParameters:
@@ -296,13 +304,8 @@ def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> J
     limits = Limits(**_read_keys(source, _section(source, data, "limits"), "limits", LIMIT_KEYS))
     for key in LIMIT_KEYS:
         _above_ambient(source, f"limits.{key}", getattr(limits, key), thermal.ambient_c)
-    sources = data.get("sources", {})
-    if not isinstance(sources, Mapping):
-        raise InputError(source, "[sources]", repr(sources), "expected key = \"free text\" lines")
-    for key, text in sources.items():
-        if not isinstance(text, str):
-            raise InputError(source, f"sources.{key}", repr(text), "expected \"free text\": where the value comes from")
-    return JointParameters(joint, motor, thermal, limits, dict(sources), source)
+    core = JointParameters(joint, motor, thermal, limits, _sources_text(source, data), source)
+    return dataclasses.replace(core, scope=_scope(source, data, core))
 
 
 def packaged_parameter_file(name: str) -> Path:

@@ -13,9 +13,8 @@ import casadi as ca
 import numpy as np
 
 from . import motor
+from .network_spec import AMBIENT, LinkSpec, NetworkSpec, NodeSpec, SourceSpec, literal_zero
 from .parameters import ThermalParameters
-
-AMBIENT = "ambient"
 
 
 @dataclass(frozen=True)
@@ -29,27 +28,37 @@ class Link:
 
 @dataclass(frozen=True)
 class HeatSource:
-    """Power ``gain * power[name] ** exponent + constant_w`` injected at ``node``.
+    """Power ``constant_w + gain * (power[name] / reference) ** exponent`` injected at ``node``.
 
     ``name`` refers to a loss or loss driver of ``motor.losses_w`` (``joule_w``, ``friction_w``,
-    ``current_sq_a2``, ``speed_abs_rad_s``); ``exponent`` is a number. A caller that holds inputs
-    over an interval may pass the interval mean of ``power[name] ** exponent`` under :attr:`feature`.
+    ``current_sq_a2``, ``speed_abs_rad_s``), None for a constant.  A caller that holds inputs over an
+    interval may pass the interval mean of ``power[name] ** exponent`` under :attr:`feature` (a numeric
+    exponent).  ``kind`` is the file's heat-source kind (``copper``, ``iron_losses``, ...) and ``term``
+    the file's source name (None: its kind), so that a numeric network can be written back as a file
+    (:func:`thermal_parameters_from_network`); both None for a source the file format does not know.
     """
 
     node: str
     name: str | None
     gain: object = 1.0
     constant_w: object = 0.0
-    exponent: float = 1.0
+    exponent: object = 1.0
+    reference: object = 1.0
+    kind: str | None = None
+    term: str | None = None
 
     @property
     def feature(self) -> str | None:
-        return None if self.name is None else feature_key(self.name, self.exponent)
+        numeric = isinstance(self.exponent, (int, float))
+        return None if self.name is None or not numeric else feature_key(self.name, self.exponent)
 
     def power_w(self, powers: Mapping[str, object]):
         if self.name is None:
             return self.constant_w
-        return self.constant_w + self.gain * feature_value(powers, self.name, self.exponent)
+        driver = powers[self.feature] if self.feature in powers else powers[self.name] ** self.exponent
+        if not (isinstance(self.reference, (int, float)) and self.reference == 1):
+            driver = driver / self.reference ** self.exponent
+        return self.constant_w + self.gain * driver
 
 
 def feature_key(name: str, exponent: float = 1.0) -> str:
@@ -126,43 +135,106 @@ def joint_heat_rhs(network: ThermalNetwork, motor_params, temperatures_c, curren
     return network.rhs(temperatures_c, losses, ambient_c)
 
 
+@dataclass(frozen=True)
+class Driver:
+    """One term of a heat-source kind: ``gain_key``'s value times the driver ``name`` (``None``: a gain of
+    1), raised to ``exponent`` (a number, or the kind's value key that holds it), plus ``constant_key``'s
+    value; :data:`REFERENCE` names the value the driver is divided by."""
+
+    gain_key: str | None
+    name: str | None
+    exponent: float | str = 1.0
+    constant_key: str | None = None
+
+
+# The powers of the file's heat-source kinds (catalogue.SOURCE_KINDS), term by term; written once.
+DRIVERS: dict[str, tuple[Driver, ...]] = {
+    "copper": (Driver(None, "joule_w"),),                                        # R(T_w) i^2
+    "iron_losses": (Driver("power_w", "speed_abs_rad_s", "speed_exponent"),),    # P (|w| / w_ref)^n
+    "friction_heating": (Driver("linear_w_s_per_rad", "speed_abs_rad_s"),        # c1 |w| + c2 w^2
+                         Driver("quadratic_w_s2_per_rad2", "speed_abs_rad_s", 2.0),
+                         Driver("motor_fraction", "friction_w")),                # + f tau_f(w) w
+    "drive_heating": (Driver("loss_w_per_a2", "current_sq_a2", 1.0, "idle_w"),),  # P_idle + k i^2
+    "constant": (Driver(None, None, 1.0, "power_w"),),
+}
+REFERENCE = {"iron_losses": "ref_speed_rad_s"}
+_WHOLE = "<whole>"  # the gain of a term without a value of its own (copper: all of R i^2)
+
+
+def heat_sources(spec: SourceSpec) -> tuple[HeatSource, ...]:
+    """The heat sources of one file source: each of its kind's terms at each node of its split, scaled
+    by the node's share; terms whose gain and constant are literal zeros are left out."""
+    out = []
+    for d in DRIVERS[spec.kind]:
+        exponent = spec[d.exponent] if isinstance(d.exponent, str) else d.exponent
+        reference = spec[REFERENCE[spec.kind]] if spec.kind in REFERENCE else 1.0
+        for node, share in spec.split.items():
+            gain = 0.0 if d.name is None else share * (1.0 if d.gain_key is None else spec[d.gain_key])
+            constant = 0.0 if d.constant_key is None else share * spec[d.constant_key]
+            if not (literal_zero(gain) and literal_zero(constant)):
+                out.append(HeatSource(node, d.name, gain, constant, exponent, reference, spec.kind, spec.name))
+    return tuple(out)
+
+
 def network_from_parameters(th: ThermalParameters) -> ThermalNetwork:
-    """The contract's three networks: one node (eq. 7), winding/casing (eq. 6), and a drive node, with
-    the heat sources of the file: Joule heat in the winding; ``friction_heating_fraction`` of the
-    friction power in the casing (the winding of a one-node network); friction heat
-    c1 |v| + c2 v^2 at ``friction_heat_node``; iron losses P_Fe (|v| / v_ref)^k in the winding; the
-    drive's idle and i^2 losses in the drive node, or without one in the sensor node. Values may be
-    CasADi symbols; sources whose gain is a literal zero are left out."""
-    if th.model == "one_node":
-        nodes, caps = ("winding",), (th["capacity_j_per_k"],)
-        links = (Link("winding", AMBIENT, th["resistance_k_per_w"]),)
-    else:
-        nodes = ("winding", "casing")
-        caps = (th["winding_capacity_j_per_k"], th["casing_capacity_j_per_k"])
-        links = (Link("winding", "casing", th["winding_casing_k_per_w"]),
-                 Link("casing", AMBIENT, th["casing_ambient_k_per_w"]))
-    if th.model == "two_node_drive":
-        nodes += ("drive",)
-        caps += (th["drive_capacity_j_per_k"],)
-        links += (Link("drive", "casing", th["drive_casing_k_per_w"]),
-                  Link("drive", AMBIENT, th["drive_ambient_k_per_w"]))
-    drive_node = "drive" if "drive" in nodes else th.sensor_node
-    exponent = float(th["iron_loss_speed_exponent"])
-    sources = (HeatSource("winding", "joule_w"),
-               HeatSource("winding" if th.model == "one_node" else "casing", "friction_w",
-                          th["friction_heating_fraction"]),
-               HeatSource(th.friction_node, "speed_abs_rad_s", th["friction_heat_linear_w_s_per_rad"]),
-               HeatSource(th.friction_node, "speed_abs_rad_s", th["friction_heat_quadratic_w_s2_per_rad2"],
-                          exponent=2.0),
-               HeatSource("winding", "speed_abs_rad_s", th["iron_loss_w"] / th["iron_loss_ref_speed_rad_s"] ** exponent,
-                          exponent=exponent),
-               HeatSource(drive_node, "current_sq_a2", th["drive_loss_w_per_a2"], th["drive_idle_w"]))
-    sources = tuple(s for s in sources if not (_zero(s.gain) and _zero(s.constant_w)))
-    return ThermalNetwork(nodes, caps, links, sources, sensor_node=th.sensor_node)
+    """The one ``ThermalNetwork`` of a [thermal] section: a general network as written, a legacy model
+    (one node, eq. 7; winding/casing, eq. 6; with a drive node) through its general form
+    (:func:`~thermo_ddp.model.network_spec.general_network`).  Values may be CasADi symbols."""
+    spec = th.general
+    links = tuple(Link(*k.between, k.resistance_k_per_w) for k in spec.links)
+    sources = tuple(h for s in spec.sources for h in heat_sources(s))
+    return ThermalNetwork(spec.node_names, tuple(n.capacity_j_per_k for n in spec.nodes), links, sources,
+                          sensor_node=th.sensor_node)
 
 
-def _zero(value) -> bool:
-    return isinstance(value, (int, float)) and value == 0
+def thermal_parameters_from_network(network: ThermalNetwork, ambient_c: float,
+                                    sensor: str | None = None) -> ThermalParameters:
+    """The inverse of :func:`network_from_parameters` for a numeric network: a ``model = "network"``
+    section (``sensor``: by default the network's sensor node).  Every heat source must carry its
+    ``kind`` (and, when one kind appears twice, its ``term``); ValueError when a source cannot be
+    written (no kind, a split that differs between the terms of one source, copper heat that is not R i^2)."""
+    nodes = tuple(NodeSpec(n, float(c)) for n, c in zip(network.nodes, network.capacities_j_per_k))
+    links = tuple(LinkSpec((k.a, k.b), float(k.resistance_k_per_w)) for k in network.links)
+    groups: dict[str, list[HeatSource]] = {}
+    for src in network.sources:
+        if src.kind not in DRIVERS:
+            raise ValueError(f"heat source {src.name!r} at {src.node!r} has no file kind: it cannot be written")
+        groups.setdefault(src.term or src.kind, []).append(src)
+    sources = tuple(_source_spec(label, group) for label, group in groups.items())
+    spec = NetworkSpec(nodes, links, sources)
+    return ThermalParameters("network", float(ambient_c), {}, sensor or network.sensor_node, network=spec)
+
+
+def _source_spec(label: str, group: list[HeatSource]) -> SourceSpec:
+    """One file source from its heat sources (the inverse of :func:`heat_sources`)."""
+    kind = group[0].kind
+    amounts: dict[str, dict[str, float]] = {}
+    values: dict[str, float] = {}
+    for d in DRIVERS[kind]:
+        for h in group:
+            if h.name != d.name or (isinstance(d.exponent, float) and h.name is not None and h.exponent != d.exponent):
+                continue
+            if d.name is not None:
+                key = d.gain_key or _WHOLE
+                amounts.setdefault(key, {}).setdefault(h.node, 0.0)
+                amounts[key][h.node] += float(h.gain)
+            if d.constant_key is not None:
+                amounts.setdefault(d.constant_key, {}).setdefault(h.node, 0.0)
+                amounts[d.constant_key][h.node] += float(h.constant_w)
+            if isinstance(d.exponent, str):
+                values |= {d.exponent: float(h.exponent), REFERENCE[kind]: float(h.reference)}
+    totals = {key: sum(per.values()) for key, per in amounts.items()}
+    base = next((key for key, total in totals.items() if total != 0), None)
+    if base is None:
+        raise ValueError(f"heat source {label!r}: no heat to write")
+    split = {node: amount / totals[base] for node, amount in amounts[base].items()}
+    for key, per in amounts.items():
+        if any(abs(a - split.get(n, 0.0) * totals[key]) > 1e-12 * (abs(totals[key]) + 1) for n, a in per.items()):
+            raise ValueError(f"heat source {label!r}: its terms are split differently; write them as two sources")
+    if _WHOLE in totals and abs(totals[_WHOLE] - 1) > 1e-12:
+        raise ValueError(f"heat source {label!r}: copper heat is R i^2 in total, here {totals[_WHOLE]:g} of it")
+    values |= {key: total for key, total in totals.items() if key != _WHOLE}
+    return SourceSpec(kind, split, values, None if label == kind else label)
 
 
 @dataclass(frozen=True)
