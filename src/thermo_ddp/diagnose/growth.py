@@ -31,20 +31,24 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..identify.network import (IRON_EXPONENT_RANGE, SOURCE_VALUES, NetworkSpec, SourceSpec, link_name)
+from ..identify.network import (IRON_EXPONENT_RANGE, capacity, free_paths, link, sink_links, with_node,
+                                with_source)
 from ..identify.network_fit import Free, NetworkFit, fit_network, sensor_noise
 from ..identify.thermal_data import ThermalGrid
+from ..model.catalogue import SOURCE_KINDS
+from ..model.network_spec import AMBIENT, NetworkSpec, SourceSpec
 from ..model.parameters import JointParameters
-from ..model.thermal import AMBIENT
 from .selection import HeldOutCheck, NestedTest, SubsetFit, SubsetSettings, nested_test
 
 log = logging.getLogger(__name__)
 
 GROWTH_TERMS = ("sensor_node", "sink_node", "source_node")
-# Physical ranges of the values a growth frees: 1 g of copper to a tonne of steel; a liquid-cooled
-# housing (1e-4 K/W) to a part in still air (100 K/W).
-CAPACITY_RANGE = (0.5, 1e6)
+# Physical ranges of the values a growth frees: capacities within 1/1000 to 10 times the file's whole
+# capacity (a node is a part of this motor, not a second coolant); a liquid-cooled housing (1e-4 K/W) to
+# a part in still air (100 K/W).
+CAPACITY_SHARE = (1e-3, 10.0)
 RESISTANCE_RANGE = (1e-4, 100.0)
+HEAT_KINDS = tuple(k for k in SOURCE_KINDS if k != "copper")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,7 +58,6 @@ class Addition:
     term: str
     where: str
     spec: NetworkSpec
-    free: tuple[Free, ...]
 
     @property
     def label(self) -> str:
@@ -76,48 +79,45 @@ def subset_fit(fit: NetworkFit, terms: frozenset = frozenset()) -> SubsetFit:
     return SubsetFit(terms, fit.rss, fit.n, len(fit.free), fit.tau, fit.success, fit.message)
 
 
-def value_bounds(params: JointParameters, heat_max_w: float, path: str) -> Free:
-    """The physical range of a value by its path (see the constants above and identify.network)."""
-    name = path.rsplit(".", 1)[1]
-    if name == "capacity_j_per_k":
-        return Free(path, *CAPACITY_RANGE)
-    if name == "resistance_k_per_w":
-        return Free(path, *RESISTANCE_RANGE)
-    if name == "speed_exponent":
-        return Free(path, *IRON_EXPONENT_RANGE, log=False)
-    if name == "loss_w_per_a2":
-        return Free(path, 0.0, heat_max_w / max(params.motor.current_nominal_a, 1e-9) ** 2, log=False)
-    if name in ("linear_w_s_per_rad", "quadratic_w_s2_per_rad2"):
-        return Free(path, 0.0, math.inf, log=False)
-    return Free(path, 0.0, heat_max_w, log=False)
+@dataclasses.dataclass(frozen=True)
+class Ranges:
+    """Physical ranges of the values a fit frees (module constants; heat bounded by the motor's rating)."""
 
+    capacity_j_per_k: tuple[float, float]
+    heat_max_w: float
+    current_nominal_a: float
 
-def free_values(spec: NetworkSpec, bounds: Callable[[str], Free]) -> tuple[Free, ...]:
-    """Every capacity, resistance and source value of ``spec`` free (a source's reference speed is fixed)."""
-    return tuple(bounds(p) for p in spec.values() if not p.endswith("ref_speed_rad_s"))
+    def free(self, path: str) -> Free:
+        name = path.rsplit(".", 1)[1]
+        if name == "capacity_j_per_k":
+            return Free(path, *self.capacity_j_per_k)
+        if name == "resistance_k_per_w":
+            return Free(path, *RESISTANCE_RANGE)
+        if name == "speed_exponent":
+            return Free(path, *IRON_EXPONENT_RANGE, log=False)
+        if name == "loss_w_per_a2":
+            return Free(path, 0.0, self.heat_max_w / self.current_nominal_a ** 2, log=False)
+        if name in ("linear_w_s_per_rad", "quadratic_w_s2_per_rad2"):
+            return Free(path, 0.0, math.inf, log=False)
+        return Free(path, 0.0, self.heat_max_w, log=False)
 
-
-def _with_node(spec: NetworkSpec, node: str, capacity: float, links: dict[tuple[str, str], float],
-               drop: tuple[str, str] | None = None) -> NetworkSpec:
-    kept = tuple(k for k in spec.links if k != drop)
-    res = {k: v for k, v in spec.resistances.items() if drop is None or k != link_name(*drop)}
-    return dataclasses.replace(spec, nodes=spec.nodes + (node,), capacities=dict(spec.capacities, **{node: capacity}),
-                               links=kept + tuple(links), resistances=res | {link_name(*k): r for k, r in links.items()})
+    def all(self, spec: NetworkSpec) -> tuple[Free, ...]:
+        return tuple(self.free(p) for p in free_paths(spec))
 
 
 def node_placements(spec: NetworkSpec, node: str) -> list[tuple[str, NetworkSpec]]:
     """``node`` on each node's path to the sink (the link split in two), or beside each node with its own
-    path to the sink; start values: a tenth of the node's capacity, the path's resistance shared."""
+    path to the sink; start values: half the node's capacity, the path's resistance shared."""
     out = []
-    for a in spec.nodes:
-        cap = 0.5 * float(spec.capacities[a])
-        sink = (a, AMBIENT) if (a, AMBIENT) in spec.links else None
+    mean_r = float(np.mean([float(k.resistance_k_per_w) for k in sink_links(spec)]))
+    for a in spec.node_names:
+        cap = 0.5 * capacity(spec, a)
+        sink = link(spec, a, AMBIENT)
         if sink is not None:
-            r = float(spec.resistances[link_name(*sink)])
-            out.append((f"between {a} and {AMBIENT}", _with_node(spec, node, cap, {(a, node): r / 2, (node, AMBIENT): r / 2},
-                                                             drop=sink)))
-        r = float(np.mean([float(v) for k, v in spec.resistances.items() if k.endswith(AMBIENT)]))
-        out.append((f"beside {a}", _with_node(spec, node, cap, {(a, node): r, (node, AMBIENT): 2 * r})))
+            r = float(sink.resistance_k_per_w)
+            out.append((f"between {a} and {AMBIENT}",
+                        with_node(spec, node, cap, {(a, node): r / 2, (node, AMBIENT): r / 2}, drop=sink)))
+        out.append((f"beside {a}", with_node(spec, node, cap, {(a, node): mean_r, (node, AMBIENT): 2 * mean_r})))
     return out
 
 
@@ -129,25 +129,22 @@ def _start_values(kind: str, heat_w: float, ref_speed: float) -> dict[str, float
             "constant": {"power_w": heat_w}}[kind]
 
 
-def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed: float) -> list[tuple[str, str, NetworkSpec]]:
-    """Every allowed addition to ``spec``: (term, where, grown spec); see the module docstring."""
+def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed: float) -> list[Addition]:
+    """Every allowed addition to ``spec`` (module docstring)."""
     out = []
-    present = {s.kind for s in spec.sources}
-    fresh = [k for k in kinds if k not in present and k != "copper" and k in SOURCE_VALUES]
-    for kind in fresh:
-        for node in spec.nodes:
+    kinds = [k for k in kinds if k in HEAT_KINDS]
+    for kind in (k for k in kinds if k not in spec.kinds):
+        for node in spec.node_names:
             src = SourceSpec(kind, {node: 1.0}, _start_values(kind, heat_w, ref_speed))
-            out.append((kind, node, dataclasses.replace(spec, sources=spec.sources + (src,))))
+            out.append(Addition(kind, node, with_source(spec, src)))
     hidden = f"node{len(spec.nodes)}"
     for where, grown in node_placements(spec, hidden):
         if where.startswith("between"):
-            out.append(("sink_node", f"{hidden} {where}", grown))
-        else:
-            for kind in (k for k in kinds if k != "copper" and k in SOURCE_VALUES):
-                src = SourceSpec(kind, {hidden: 1.0}, _start_values(kind, heat_w, ref_speed))
-                others = tuple(s for s in grown.sources if s.kind != kind)
-                out.append(("source_node", f"{hidden} {where} hosting {kind}",
-                            dataclasses.replace(grown, sources=others + (src,))))
+            out.append(Addition("sink_node", f"{hidden} {where}", grown))
+            continue
+        for kind in kinds:
+            src = SourceSpec(kind, {hidden: 1.0}, _start_values(kind, heat_w, ref_speed))
+            out.append(Addition("source_node", f"{hidden} {where} hosting {kind}", with_source(grown, src)))
     return out
 
 
@@ -171,19 +168,19 @@ class Grower:
                  settings: GrowthSettings, residual_noise: Callable[[NetworkFit], dict], progress=None):
         self.params, self.grids, self.kinds, self.settings = params, list(grids), tuple(kinds), settings
         self.residual_noise, self.progress = residual_noise, progress
-        m = params.motor
+        self.sensor = params.thermal.sensor_node
+        m, whole = params.motor, sum(float(n.capacity_j_per_k) for n in params.thermal.general.nodes)
         self.heat_max_w = max(100.0, 5.0 * m.resistance_ohm * m.current_nominal_a ** 2)
+        self.ranges = Ranges((CAPACITY_SHARE[0] * whole, CAPACITY_SHARE[1] * whole), self.heat_max_w,
+                             m.current_nominal_a)
         speeds = np.abs(np.concatenate([g.velocity for g in grids]))
         self.ref_speed = max(float(np.percentile(speeds, 95)), 1e-3)
         sensors = dict.fromkeys(n for g in grids for n in g.sensors)
         self.noise = {n: sensor_noise(grids, n) for n in sensors}
         self._folds: dict[str, list[np.ndarray]] = {}
 
-    def bounds(self, path: str) -> Free:
-        return value_bounds(self.params, self.heat_max_w, path)
-
     def fit(self, spec: NetworkSpec, weights: Sequence[float] | None = None) -> NetworkFit:
-        fit = fit_network(self.params, spec, free_values(spec, self.bounds), self.grids, weights=weights,
+        fit = fit_network(self.params, spec, self.sensor, self.ranges.all(spec), self.grids, weights=weights,
                           noise=self.noise, max_nfev=self.settings.max_nfev)
         if self.progress is not None:
             self.progress.update(1)
@@ -197,21 +194,21 @@ class Grower:
         """Add a node for every measured node the network lacks, each where it fits best."""
         steps, fit = [], self.fit(spec)
         for node in self.noise:
-            if node in spec.nodes:
+            if node in spec.node_names:
                 continue
             tried = [(where, self.fit(grown)) for where, grown in node_placements(spec, node)]
             where, fit = min(tried, key=lambda t: (not t[1].success, t[1].rss))
             spec = fit.spec
-            steps.append(Step(Addition("sensor_node", f"{node} {where}", spec, fit.free), fit, None, tried=len(tried)))
+            steps.append(Step(Addition("sensor_node", f"{node} {where}", spec), fit, None, tried=len(tried)))
         return spec, fit, steps
 
     def step(self, fit: NetworkFit) -> tuple[Step | None, list[tuple[Addition, NetworkFit]]]:
         """Fit every addition to ``fit``'s network; the best one that passes the tests (None if none)."""
         tried = []
-        for term, where, grown in additions(fit.spec, self.kinds, 0.1 * self.heat_max_w, self.ref_speed):
-            new = self.fit(grown)
+        for addition in additions(fit.spec, self.kinds, 0.1 * self.heat_max_w, self.ref_speed):
+            new = self.fit(addition.spec)
             if new.success:
-                tried.append((Addition(term, where, new.spec, new.free), new))
+                tried.append((dataclasses.replace(addition, spec=new.spec), new))
         base, s = subset_fit(fit), self.settings.selection
         tests = [(a, f, nested_test(base, subset_fit(f, frozenset({a.term})))) for a, f in tried]
         passing = sorted((t for t in tests if t[2].significant(s.alpha, len(tests), s.min_rmse_drop)),

@@ -11,12 +11,13 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from .._figures import new_figure
-from ..identify.network import NetworkSpec, one_node_spec
+from ..model.network_spec import NetworkSpec
 from ..identify.network_fit import NetworkFit
 from ..identify.thermal_data import ThermalGrid
-from ..model.parameters import JointParameters
+from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
 from .growth import Addition, GrowthSettings, Grower, Step, subset_fit
 from .localise import ResidualSeries
@@ -49,18 +50,6 @@ def envelope(grids: Sequence[ThermalGrid]) -> dict[str, list[float]]:
             "speed_rad_s": span([np.abs(g.velocity) for g in grids]),
             "ambient_c": span([g.ambient_c for g in grids]),
             "temperature_c": span([g.measured_c for g in grids])}
-
-
-def start_spec(params: JointParameters) -> NetworkSpec:
-    """The parameter file's network as identification's spec."""
-    th = params.thermal
-    if th.model == "one_node":
-        return one_node_spec(th["capacity_j_per_k"], th["resistance_k_per_w"])
-    raise NotImplementedError(th.model)
-
-
-def allowed_kinds(params: JointParameters) -> tuple[str, ...]:
-    return ("copper", "iron_losses", "friction_heating", "drive_heating", "constant")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,7 +112,7 @@ class NetworkDiagnosis:
         if not self.final.success:
             return None
         data = self.params.to_dict()
-        data["thermal"] = network_section(self.final.spec, self.params.thermal.ambient_c)
+        data["thermal"] = network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor)
         data["uncertainty"] = self.final.uncertainty()
         data["envelope"] = envelope(self.grids)
         if self.alternatives:
@@ -140,7 +129,7 @@ class NetworkDiagnosis:
                "baseline": _summary(self.baseline), "mismatches": [],
                "missing_physics": [self.step_report(s, b) for s, b in zip(self.steps, befores)],
                "not_determinable": self.not_determinable(), "final": _summary(self.final),
-               "network": network_section(self.final.spec, self.params.thermal.ambient_c),
+               "network": network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor),
                "noise": {"sensor_c": dict(self.final.noise_c), "residual_c": dict(self.residual_sigma)},
                "alternatives": list(self.alternatives), "unexplained": [], "validation": None,
                "parameter_file": self.parameter_file()}
@@ -169,8 +158,8 @@ class NetworkDiagnosis:
             for node, measured in grid.sensors.items():
                 line = ax.plot(grid.time_s, measured, ".", ms=1.5, label=f"{node} recorded")[0]
                 for fit, style in ((self.baseline, "--"), (self.final, "-")):
-                    if node in fit.spec.nodes:
-                        ax.plot(grid.time_s, fit.simulated[grid.name][fit.spec.nodes.index(node)], style,
+                    if node in fit.spec.node_names:
+                        ax.plot(grid.time_s, fit.simulated[grid.name][fit.spec.node_names.index(node)], style,
                                 color=line.get_color(), lw=1.0)
             ax.set(title=f"{grid.name}: {self.status} (dashed: baseline, solid: final)", xlabel="time [s]",
                    ylabel="temperature [°C]")
@@ -180,18 +169,14 @@ class NetworkDiagnosis:
         return Path(path)
 
 
-def network_section(spec: NetworkSpec, ambient_c: float) -> dict:
+def network_section(spec: NetworkSpec, ambient_c: float, sensor: str) -> dict:
     """The file's [thermal] section of a network (``model = "network"``)."""
-    return {"model": "network", "ambient_c": ambient_c, "sensor": spec.sensor,
-            "node": [{"name": n, "capacity_j_per_k": float(spec.capacities[n])} for n in spec.nodes],
-            "link": [{"between": [a, b], "resistance_k_per_w": float(spec.resistances[f"{a}-{b}"])}
-                     for a, b in spec.links],
-            "source": [{"kind": s.kind, "split": dict(s.split), **{k: float(v) for k, v in s.values.items()}}
-                       for s in spec.sources]}
+    return ThermalParameters("network", ambient_c, {}, sensor, network=spec).to_dict()
 
 
 def _describe(spec: NetworkSpec) -> str:
-    return f"network of {len(spec.nodes)} node(s) ({', '.join(spec.nodes)}; heat: {', '.join(s.kind for s in spec.sources)})"
+    return (f"network of {len(spec.nodes)} node(s) ({', '.join(spec.node_names)}; heat: "
+            f"{', '.join(s.label for s in spec.sources)})")
 
 
 def _summary(fit: NetworkFit) -> dict:
@@ -222,13 +207,19 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
 
 
 def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, settings: GrowthSettings | None = None,
-                     window_s: float = 120.0, progress=None, rows: dict | None = None) -> NetworkDiagnosis:
-    """Grow the file's network on ``grids`` (every sensor) and judge the result (module docstring)."""
+                     window_s: float = 120.0, progress: bool | None = None, rows: dict | None = None
+                     ) -> NetworkDiagnosis:
+    """Grow the file's network on ``grids`` (every sensor) and judge the result (module docstring);
+    ``progress``: a tqdm bar over the fits (None: only on a terminal)."""
     settings = settings or GrowthSettings()
-    grower = Grower(params, grids, allowed_kinds(params), settings, residual_noise(grids, window_s), progress)
-    spec = start_spec(params)
-    baseline = grower.fit(spec)
-    steps, final, tries = grower.grow(spec)
+    spec = params.thermal.general
+    with tqdm(desc="network growth fits", unit="fit", disable=None if progress is None else not progress) as bar:
+        grower = Grower(params, grids, params.scope.allowed_sources, settings, residual_noise(grids, window_s), bar)
+        baseline = grower.fit(spec)
+        steps, final, tries = grower.grow(spec)
+        validation = None
+        if len(grids) > 1:
+            validation = (grower.held_out_rmse(baseline.spec), grower.held_out_rmse(final.spec))
     sigma = grower.residual_noise(final)
     explained = grower.explained(final)
     worst = max(final.per_sensor(), key=lambda n: final.rmse(n) / sigma[n])
@@ -237,9 +228,6 @@ def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, s
     if not explained:
         message += (f" (> {settings.max_noise_ratio:g}): no allowed addition (node, link or heat source of "
                     f"{', '.join(grower.kinds)}) explains what is left")
-    validation = None
-    if len(grids) > 1:
-        validation = (grower.held_out_rmse(baseline.spec), grower.held_out_rmse(final.spec))
     return NetworkDiagnosis(tuple(g.name for g in grids), params, tuple(grids), explained and final.success,
                             "ok" if explained and final.success else "model_does_not_fit", message, baseline, final,
                             tuple(steps), alternatives(steps, tries, settings), validation, sigma, rows or {})

@@ -29,7 +29,8 @@ from scipy import optimize
 from ..model.parameters import JointParameters
 from ..model.thermal import joint_heat_rhs
 from .fit_report import Z95, covariance, integrated_autocorrelation
-from .network import NetworkSpec, iron_feature, iron_feature_key
+from ..model.network_spec import NetworkSpec
+from .network import identification_network, iron_features, values_of, with_values
 from .thermal_data import INPUT_ROWS, ThermalGrid
 
 log = logging.getLogger(__name__)
@@ -71,14 +72,15 @@ def sensor_noise(grids: Sequence[ThermalGrid], node: str) -> float:
 
 
 class NetworkModel:
-    """``spec`` with ``free`` values as symbols: step, initial state and their sensitivities."""
+    """``spec`` (``sensor``: the node ``temperature_c`` measures) with ``free`` values as symbols: step,
+    initial state and their sensitivities."""
 
-    def __init__(self, params: JointParameters, spec: NetworkSpec, free: Sequence[Free]):
-        self.params, self.spec, self.free = params, spec, tuple(free)
-        self.nodes = spec.nodes
+    def __init__(self, params: JointParameters, spec: NetworkSpec, sensor: str, free: Sequence[Free]):
+        self.params, self.spec, self.sensor, self.free = params, spec, sensor, tuple(free)
+        self.nodes = spec.node_names
         self._p = ca.SX.sym("free", len(self.free))
-        sym = spec.with_values({f.path: self._p[i] for i, f in enumerate(self.free)})
-        self._network = sym.thermal_network(symbolic_iron=True)
+        sym = with_values(spec, {f.path: self._p[i] for i, f in enumerate(self.free)})
+        self._network = identification_network(sym, sensor)
         self._rhs, self._temps, self._u = self._rhs_expression(sym)
         n, q = len(self.nodes), len(self.free)
         h = self._u[0]
@@ -96,10 +98,7 @@ class NetworkModel:
         u = ca.SX.sym("inputs", len(INPUT_ROWS))
         row = {name: u[k] for k, name in enumerate(INPUT_ROWS)}
         held = {key: row[key] for key in INPUT_ROWS[1:] if key != "ambient_c"}
-        for k, src in enumerate(sym.sources):
-            if src.kind == "iron_losses":
-                held[iron_feature_key(k)] = iron_feature(held, src.values["speed_exponent"],
-                                                         src.values["ref_speed_rad_s"])
+        held |= iron_features(sym, held)
         rhs = joint_heat_rhs(self._network, self.params.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0,
                              row["ambient_c"], held)
         return rhs, temps, u
@@ -142,6 +141,7 @@ class NetworkFit:
     """A fitted network: values by path, 95 % intervals, residuals per grid and sensor, noise per sensor."""
 
     spec: NetworkSpec
+    sensor: str
     free: tuple[Free, ...]
     stderr: Mapping[str, float]          # of theta (log value for log-scaled paths), inflated
     residuals: Mapping[tuple[str, str], np.ndarray]   # (grid, node) -> measured - model
@@ -154,7 +154,8 @@ class NetworkFit:
 
     @property
     def values(self) -> dict[str, float]:
-        return {f.path: float(self.spec.values()[f.path]) for f in self.free}
+        every = values_of(self.spec)
+        return {f.path: float(every[f.path]) for f in self.free}
 
     @property
     def n(self) -> int:
@@ -167,7 +168,7 @@ class NetworkFit:
 
     def rmse(self, node: str | None = None, grids: Sequence[str] | None = None) -> float:
         """RMSE of ``node`` (the spec's sensor by default) over ``grids`` (all by default)."""
-        node = node or self.spec.sensor
+        node = node or self.sensor
         parts = [r for (g, s), r in self.residuals.items() if s == node and (grids is None or g in grids)]
         return float(np.sqrt(np.mean(np.concatenate(parts) ** 2))) if parts else math.nan
 
@@ -186,9 +187,10 @@ class NetworkFit:
             value, err = self.values[f.path], self.stderr.get(f.path, math.inf)
             if f.log:
                 factor = math.exp(min(Z95 * err, 700.0))
-                out[f.path] = [value / factor, value * factor]
+                lo, hi = value / factor, value * factor
             else:
-                out[f.path] = [value - Z95 * err, value + Z95 * err]
+                lo, hi = value - Z95 * err, value + Z95 * err
+            out[f.path] = [max(lo, f.low), min(hi, f.high)]  # within the physical range searched
         return out
 
     def relative_error(self, path: str) -> float:
@@ -198,16 +200,16 @@ class NetworkFit:
         return err if f.log else err / max(abs(self.values[path]), 1e-12)
 
 
-def fit_network(params: JointParameters, spec: NetworkSpec, free: Sequence[Free], grids: Sequence[ThermalGrid], *,
-                weights: Sequence[float] | None = None, noise: Mapping[str, float] | None = None,
-                max_nfev: int = 100) -> NetworkFit:
+def fit_network(params: JointParameters, spec: NetworkSpec, sensor: str, free: Sequence[Free],
+                grids: Sequence[ThermalGrid], *, weights: Sequence[float] | None = None,
+                noise: Mapping[str, float] | None = None, max_nfev: int = 100) -> NetworkFit:
     """Fit ``free`` values of ``spec`` (their start: the spec's) to every sensor of ``grids``.  ``weights``
     (per grid, 0 or 1) selects the grids the cost sees; residuals are returned for all."""
-    model = NetworkModel(params, spec, free)
+    model = NetworkModel(params, spec, sensor, free)
     weights = [1.0] * len(grids) if weights is None else list(weights)
-    sensors = [n for n in spec.nodes if any(n in g.sensors for g in grids)]
+    sensors = [n for n in model.nodes if any(n in g.sensors for g in grids)]
     noise = dict(noise or {n: sensor_noise(grids, n) for n in sensors})
-    start = spec.values()
+    start = values_of(spec)
     theta0 = np.array([f.theta(float(start[f.path])) for f in free])
     lo, hi = (np.array(b) for b in zip(*(f.bounds() for f in free))) if free else (np.zeros(0), np.zeros(0))
     cache: dict[bytes, tuple] = {}
@@ -225,7 +227,8 @@ def fit_network(params: JointParameters, spec: NetworkSpec, free: Sequence[Free]
                                          bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
                                          ftol=1e-6, xtol=1e-8, gtol=1e-8)
         except ValueError as err:
-            return _failed(spec, free, grids, noise, f"not finite at the start ({err})")
+            return NetworkFit(spec, sensor, tuple(free), {}, {}, {}, noise, 1.0, False, "not_finite",
+                              f"not finite at the start ({err})")
         theta, ok, status, message = sol.x, sol.status > 0 or sol.status == 0, _status(sol.status), sol.message
     else:
         theta, ok, status, message = theta0, True, "converged", "nothing free"
@@ -258,7 +261,7 @@ def _residuals(model: NetworkModel, grids, theta, weights, noise, sensors):
 
 def _result(model: NetworkModel, grids, theta, weights, noise, sensors, ok, status, message) -> NetworkFit:
     vals = np.array([f.value(t)[0] for f, t in zip(model.free, theta)])
-    spec = model.spec.with_values({f.path: float(v) for f, v in zip(model.free, vals)})
+    spec = with_values(model.spec, {f.path: float(v) for f, v in zip(model.free, vals)})
     residuals, simulated = {}, {}
     for grid in grids:
         temps, _ = model.simulate(grid, vals)
@@ -275,9 +278,6 @@ def _result(model: NetworkModel, grids, theta, weights, noise, sensors, ok, stat
         cov, _ = covariance(jac, np.concatenate(seen))
         stderr = {f.path: math.sqrt(tau * max(cov[i, i], 0.0)) for i, f in enumerate(model.free)}
     finite = all(np.all(np.isfinite(r)) for r in residuals.values())
-    return NetworkFit(spec, model.free, stderr, residuals, simulated, noise, tau, bool(ok and finite), status,
+    return NetworkFit(spec, model.sensor, model.free, stderr, residuals, simulated, noise, tau, bool(ok and finite), status,
                       str(message))
 
-
-def _failed(spec, free, grids, noise, message: str) -> NetworkFit:
-    return NetworkFit(spec, tuple(free), {}, {}, {}, noise, 1.0, False, "not_finite", message)
