@@ -125,6 +125,16 @@ def test_steady_state_of_a_hand_built_network_is_the_resistor_network_answer():
     np.testing.assert_allclose(net.steady_state({}, 20.0), [tw, tt, ty], rtol=1e-12)
 
 
+def test_a_symbolic_iron_exponent_has_a_finite_derivative_at_rest():
+    params = _params(NETWORK)
+    n = ca.SX.sym("n")
+    sym = params.with_values({"thermal.source.iron_losses.speed_exponent": n})
+    from thermo_ddp.model.thermal import joint_heat_rhs
+    rhs = joint_heat_rhs(network_from_parameters(sym.thermal), sym.motor, np.full(4, 50.0), 10.0, 0.0, 30.0)
+    grad = np.array(ca.Function("g", [n], [ca.jacobian(rhs, n)])(1.6), float)
+    assert np.all(np.isfinite(grad))
+
+
 def test_symbols_at_dotted_paths_differentiate_the_same_rhs():
     params = _params(NETWORK)
     paths = ("thermal.node.tooth.capacity_j_per_k", "thermal.link.tooth-winding.resistance_k_per_w",
@@ -165,6 +175,16 @@ def test_scope_sections_are_read_checked_and_written_back_unchanged():
     alt = params.alternative(0)
     assert alt.value("thermal.source.drive_heating.idle_w") == 300.0 and not alt.scope.alternatives
     assert alt.value("thermal.source.iron_losses.power_w") == 0.0
+    from thermo_ddp.model.scope import Alternative
+    rebuilt = _params(NETWORK).with_scope(heat_sources=tuple(SCOPE["hardware"]["heat_sources"]),
+                                          uncertainty={k: tuple(v) for k, v in SCOPE["uncertainty"].items()},
+                                          envelope={k: tuple(v) for k, v in SCOPE["envelope"].items()},
+                                          alternatives=(Alternative(("drive_heating",), {
+                                              "thermal.source.iron_losses.power_w": 0.0,
+                                              "thermal.source.drive_heating.idle_w": 300.0}),))
+    assert dumps_parameters(rebuilt) == text
+    with pytest.raises(Exception, match="outside the interval"):
+        params.with_scope(uncertainty={"motor.resistance_ohm": (0.1, 0.2)})
 
 
 def test_the_packaged_paderborn_file_says_what_a_test_bench_pmsm_has():
@@ -217,3 +237,19 @@ def test_a_legacy_file_with_heat_its_hardware_cannot_have_is_refused():
     with pytest.raises(Exception, match="drive_heating heat"):
         _params(LEGACY["one_node"] | {"friction_heating_fraction": 0.0, "iron_loss_w": 0.0},
                 hardware={"heat_sources": ["copper"]})
+
+
+def test_the_planners_model_is_the_same_with_the_network_form_of_the_elbow():
+    """The composed arm + motor + heat ODE (what plan and MPC integrate) from the elbow's two_node_drive file
+    and from that file written as model = "network": the same right-hand side."""
+    from thermo_ddp.model.actuated import ActuatedArm, ArmSettings
+    legacy = _params(LEGACY["two_node_drive"])
+    network = _write_back(legacy)
+    models = [ActuatedArm.from_parameters(ArmSettings(), {"arm_left_4_joint": p}) for p in (legacy, network)]
+    assert models[0].state_names == models[1].state_names
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        x = np.concatenate([rng.uniform(-1.5, 0.0, 1), rng.uniform(-2, 2, 1), rng.uniform(26, 90, 3)])
+        u, amb = rng.uniform(-5, 5, 1), 26.0
+        a, b = (np.array(m.ode(x, u, amb), float).ravel() for m in models)
+        np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)

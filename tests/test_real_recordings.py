@@ -25,7 +25,7 @@ FIT = ThermalSettings(min_step_s=10.0, max_step_s=10.0)  # thermal time constant
 
 def _window(rec: Recording, lo: float, hi: float, name: str) -> Recording:
     keep = (rec.time_s >= lo) & (rec.time_s < hi)
-    return dataclasses.replace(rec, name=name, **{c: getattr(rec, c)[keep] for c in rec.columns})
+    return dataclasses.replace(rec.take(keep), name=name)
 
 
 @pytest.fixture(scope="module")

@@ -330,3 +330,48 @@ def test_implausible_magnitudes_named(tmp_path, column, value):
     with pytest.raises(InputError, match="implausible") as err:
         read_csv(path)
     assert (err.value.field, err.value.row) == (column, 3)
+
+
+# --- several sensors: node_<name>_c columns and a column map's [sensors] table ----------------------
+def _multi_sensor() -> Recording:
+    t = np.arange(0.0, 10.0)
+    return Recording("m", t, current_a=np.ones_like(t), temperature_c=30 + t, sensors={"tooth": 25 + t, "yoke": 20 + t / 2})
+
+
+def test_node_columns_round_trip_through_the_contract_csv(tmp_path):
+    rec = _multi_sensor()
+    back = read_csv(rec.to_csv(tmp_path / "m.csv"))
+    assert back.sensor_columns == ("node_tooth_c", "node_yoke_c")
+    for node, values in rec.sensors.items():
+        np.testing.assert_array_equal(back.sensors[node], values)
+    by_node = back.temperatures_by_node("winding")
+    assert set(by_node) == {"winding", "tooth", "yoke"}
+    np.testing.assert_array_equal(by_node["winding"], rec.temperature_c)
+
+
+def test_take_and_resample_carry_the_sensors():
+    rec = _multi_sensor()
+    part = rec.take(slice(3, 7))
+    np.testing.assert_array_equal(part.sensors["yoke"], rec.sensors["yoke"][3:7])
+    assert part.row_offset == 3 and len(part) == 4
+    half = resample(rec, np.arange(0.0, 9.0, 0.5))
+    np.testing.assert_allclose(half.sensors["tooth"], 25 + np.arange(0.0, 9.0, 0.5))
+    with pytest.raises(ValueError):
+        rec.sensors["tooth"][0] = 0.0  # read-only like every column
+
+
+def test_a_map_reads_its_sensors_table(tmp_path):
+    csv = _write(tmp_path / "log.csv", ["t", "I", "Tw", "Tt"], [["0", "1", "30", "25"], ["1", "1", "31", "26"]])
+    cmap = column_map_from_dict({"time": {"column": "t"}, "columns": {"current_a": "I", "temperature_c": "Tw"},
+                                 "sensors": {"tooth": {"column": "Tt", "offset": 0.5}}}, "map.toml")
+    rec, = read_mapped_csv(csv, cmap).recordings
+    np.testing.assert_array_equal(rec.sensors["tooth"], [25.5, 26.5])
+    assert cmap.wanted_by("Tt") == "sensors.tooth"
+
+
+@pytest.mark.parametrize("sensors, field", [({"2nd": np.zeros(10)}, "sensors"), ({"tooth": np.zeros(9)}, "node_tooth_c"),
+                                            ({"tooth": np.full(10, 350.0)}, "node_tooth_c")])
+def test_bad_sensors_are_refused(sensors, field):
+    with pytest.raises(InputError) as err:
+        Recording("bad", np.arange(10.0), temperature_c=np.zeros(10), sensors=sensors)
+    assert f"{field} = " in str(err.value)

@@ -1,11 +1,22 @@
 """Validation of a parameter file on recordings: predict, do not refit (``thermo-ddp validate``).
 
 Each recording (each segment of a split CSV) is simulated open loop with the file's thermal network
-(``network_from_parameters``, heated through ``joint_heat_rhs``) from every node at the segment's first
-measured temperature, with the recorded current, speed and ambient held over each step of a
-``grid_s`` grid (losses averaged exactly over the step, :func:`thermal_grid`), integrated by the
-trapezoidal rule solved exactly for the network (affine in the temperatures over a step).  The error
-is the predicted sensor node minus the measurement at the grid's kept samples.
+(``network_from_parameters``, heated through ``joint_heat_rhs``) from every measured node at its first
+measurement (the others at the sensor's), with the recorded current, speed and ambient held over each
+step of a ``grid_s`` grid (losses averaged exactly over the step, :func:`thermal_grid`; a speed power
+the grid does not hold, such as an iron loss's fitted exponent, is taken of the step's mean speed),
+integrated by the trapezoidal rule solved exactly for the network (affine in the temperatures over a
+step).  The error is a predicted node minus its measurement at the grid's kept samples: the sensor
+(``temperature_c``) and every further measured node (``node_<name>_c``) the network has (``per_sensor``).
+
+The file's scope is reported too: the recordings against its ``[envelope]`` (:mod:`thermo_ddp.envelope`),
+the prediction of each ``[[alternatives]]``, and ``band_k``, the widest spread of the sensor's prediction
+that the ``[uncertainty]`` intervals and the alternatives allow.  The intervals enter to first order: at
+each sample the prediction's sensitivity J to each uncertain value (CasADi derivatives through the whole
+simulation) spans [y + sum min(J (lo - x), J (hi - x)), y + sum max(...)]; the alternatives' predictions
+widen that band; ``band_k`` is its largest width over every sample.  First order is exact for the
+capacities' and resistances' small intervals only approximately (the network is nonlinear in them):
+the band is an estimate, not a guarantee.
 """
 from __future__ import annotations
 
@@ -13,18 +24,19 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
 from ._figures import new_figure
+from .envelope import TOLERANCE, EnvelopeCheck, check_envelope
 from .errors import InputError
 from .identify.thermal import load_joint_parameters
 from .identify.thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 from .model.parameters import JointParameters
 from .model.thermal import joint_heat_rhs, network_from_parameters
-from .recordings import RecordingSet, as_recordings, read_recordings
+from .recordings import Recording, RecordingSet, as_recordings, read_recordings
 
 log = logging.getLogger(__name__)
 
@@ -32,23 +44,32 @@ log = logging.getLogger(__name__)
 @dataclasses.dataclass(frozen=True)
 class ValidateSettings:
     """``grid_s``: step of the prediction grid (samples closer than this are merged, the losses held
-    over a step are its exact means; thermal time constants are tens of seconds and more)."""
+    over a step are its exact means; thermal time constants are tens of seconds and more);
+    ``envelope_tolerance``: how far beyond the identified range, as a share of its width, a quantity may
+    reach before the recording counts as outside the envelope."""
 
     grid_s: float = 1.0
+    envelope_tolerance: float = TOLERANCE
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.grid_s, (int, float)) and math.isfinite(self.grid_s) and self.grid_s > 0):
-            raise InputError("validate settings", "grid_s", self.grid_s, "must be a finite number > 0")
+        for name in ("grid_s", "envelope_tolerance"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError("validate settings", name, value, "must be a finite number > 0")
 
 
 @dataclasses.dataclass(frozen=True)
 class Prediction:
-    """One recording: measured and predicted sensor temperature at the kept samples."""
+    """One recording: measured and predicted sensor temperature at the kept samples; ``nodes``: every
+    measured node the network has, (measured, predicted); ``band_k``: the spread the file's uncertainty
+    and alternatives allow here (0 without them)."""
 
     recording: str
     time_s: np.ndarray
     measured_c: np.ndarray
     predicted_c: np.ndarray
+    nodes: Mapping[str, tuple[np.ndarray, np.ndarray]] = dataclasses.field(default_factory=dict)
+    band_k: float = 0.0
 
     @property
     def error_c(self) -> np.ndarray:
@@ -62,9 +83,24 @@ class Prediction:
     def max_abs_error(self) -> float:
         return float(np.max(np.abs(self.error_c)))
 
+    @property
+    def finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.predicted_c)))
+
     def to_dict(self) -> dict:
         return {"recording": self.recording, "rmse": self.rmse, "max_abs_error": self.max_abs_error,
                 "samples": int(self.time_s.size)}
+
+
+@dataclasses.dataclass(frozen=True)
+class AlternativeScore:
+    """The prediction of one of the file's ``[[alternatives]]``: its terms and sensor RMSE over every recording."""
+
+    terms: tuple[str, ...]
+    rmse: float
+
+    def to_dict(self) -> dict:
+        return {"terms": list(self.terms), "rmse": self.rmse}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,10 +110,12 @@ class Validation:
     model: str
     predictions: tuple[Prediction, ...]
     rows: dict = dataclasses.field(default_factory=dict)
+    envelope: EnvelopeCheck = EnvelopeCheck((), False)
+    alternatives: tuple[AlternativeScore, ...] = ()
 
     @property
     def success(self) -> bool:
-        return all(np.all(np.isfinite(p.predicted_c)) for p in self.predictions)
+        return all(p.finite for p in self.predictions)
 
     @property
     def status(self) -> str:
@@ -85,29 +123,40 @@ class Validation:
 
     @property
     def message(self) -> str:
-        if self.success:
-            return f"predicted {len(self.predictions)} recordings with the file as it is (no refit)"
-        bad = [p.recording for p in self.predictions if not np.all(np.isfinite(p.predicted_c))]
-        return f"the prediction diverged (thermal runaway?) on {', '.join(bad)}"
+        if not self.success:
+            bad = [p.recording for p in self.predictions if not p.finite]
+            return f"the prediction diverged (thermal runaway?) on {', '.join(bad)}"
+        return f"predicted {len(self.predictions)} recordings with the file as it is (no refit); {self.envelope.message}"
 
     @property
     def rmse(self) -> float:
-        errors = np.concatenate([p.error_c for p in self.predictions])
-        return float(np.sqrt(np.mean(errors ** 2)))
+        return _rmse([p.error_c for p in self.predictions])
 
     @property
     def max_abs_error(self) -> float:
         return max(p.max_abs_error for p in self.predictions)
 
+    @property
+    def per_sensor(self) -> dict[str, dict[str, float]]:
+        """``{node: {"rmse": K}}`` over every recording, for each measured node the network has."""
+        nodes = dict.fromkeys(n for p in self.predictions for n in p.nodes)
+        return {n: {"rmse": _rmse([p.nodes[n][1] - p.nodes[n][0] for p in self.predictions if n in p.nodes])}
+                for n in nodes}
+
+    @property
+    def band_k(self) -> float:
+        return max((p.band_k for p in self.predictions), default=0.0)
+
     def to_dict(self) -> dict:
+        common = {"model": self.model, "recordings": [p.recording for p in self.predictions], "rows": dict(self.rows),
+                  "envelope": self.envelope.to_dict()}
         if not self.success:
-            return {"success": False, "status": self.status, "message": self.message, "model": self.model,
-                    "recordings": [p.recording for p in self.predictions], "rmse": None, "max_abs_error": None,
-                    "per_recording": [], "rows": dict(self.rows)}
-        return {"success": True, "status": self.status, "message": self.message, "model": self.model,
-                "recordings": [p.recording for p in self.predictions], "rmse": self.rmse,
+            return {"success": False, "status": self.status, "message": self.message, **common, "rmse": None,
+                    "max_abs_error": None, "per_recording": [], "per_sensor": {}, "alternatives": [], "band_k": None}
+        return {"success": True, "status": self.status, "message": self.message, **common, "rmse": self.rmse,
                 "max_abs_error": self.max_abs_error, "per_recording": [p.to_dict() for p in self.predictions],
-                "rows": dict(self.rows)}
+                "per_sensor": self.per_sensor, "alternatives": [a.to_dict() for a in self.alternatives],
+                "band_k": self.band_k}
 
     def report(self) -> str:
         lines = [f"validate {self.model}: {self.status} ({self.message})"]
@@ -115,6 +164,11 @@ class Validation:
             lines += [f"  {p.recording}: rmse {p.rmse:.3g} K, worst {p.max_abs_error:.3g} K, {p.time_s.size} samples"
                       for p in self.predictions]
             lines.append(f"all: rmse {self.rmse:.3g} K, worst {self.max_abs_error:.3g} K")
+            if len(self.per_sensor) > 1:
+                lines.append("per sensor: " + ", ".join(f"{n} {v['rmse']:.3g} K" for n, v in self.per_sensor.items()))
+            lines += [f"alternative {'+'.join(a.terms)}: rmse {a.rmse:.3g} K" for a in self.alternatives]
+            if self.band_k > 0:
+                lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart")
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 4) -> Path:
@@ -134,39 +188,105 @@ class Validation:
         return Path(path)
 
 
-def _simulator(params: JointParameters) -> tuple[ca.Function, int]:
-    """(one step of every node over a held-input step of the grid, index of the sensor node)."""
-    network = network_from_parameters(params.thermal)
+def _rmse(errors: Sequence[np.ndarray]) -> float:
+    return float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Simulator:
+    """One held-input step of every node of a file's network, ``step(temps, inputs, p)``, where ``p`` are
+    the values at ``paths`` (empty: the file as it is)."""
+
+    step: ca.Function
+    nodes: tuple[str, ...]
+    sensor: str
+    paths: tuple[str, ...]
+
+
+def _simulator(params: JointParameters, paths: Sequence[str] = ()) -> _Simulator:
+    p = ca.SX.sym("p", len(paths))
+    sym = params.with_values(dict(zip(paths, ca.vertsplit(p)))) if paths else params
+    network = network_from_parameters(sym.thermal)
     temps = ca.SX.sym("temperatures_c", len(network.nodes))
     u = ca.SX.sym("inputs", len(INPUT_ROWS))
     row = dict(zip(INPUT_ROWS, ca.vertsplit(u)))
     held = {k: row[k] for k in INPUT_ROWS[1:] if k != "ambient_c"}
-    rhs = joint_heat_rhs(network, params.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held)
+    rhs = joint_heat_rhs(network, sym.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held)
     h = row["step_s"]
     trapezoid = temps + h * ca.solve(ca.SX.eye(temps.numel()) - 0.5 * h * ca.jacobian(rhs, temps), rhs)
-    return ca.Function("validate_step", [temps, u], [trapezoid]), network.index(network.sensor_node)
+    step = ca.Function("validate_step", [temps, u, p], [trapezoid])
+    return _Simulator(step, network.nodes, network.sensor_node, tuple(paths))
 
 
-def _predict(step: ca.Function, sensor: int, grid: ThermalGrid) -> Prediction:
-    x0 = np.full(step.size1_in(0), grid.measured_c[0])
-    states = np.asarray(step.mapaccum(grid.inputs.shape[1])(x0, grid.inputs))
-    predicted = np.concatenate([[grid.measured_c[0]], states[sensor, grid.output_index]])
-    return Prediction(grid.name, grid.time_s, grid.measured_c, predicted)
+def _measured(rec: Recording, grid: ThermalGrid, sim: _Simulator) -> dict[str, np.ndarray]:
+    """Every measured node of the network at the grid's kept samples."""
+    kept = np.searchsorted(rec.time_s, grid.time_s)
+    by_node = rec.temperatures_by_node(sim.sensor)
+    return {n: np.asarray(by_node[n], float)[kept] for n in sim.nodes if n in by_node}
+
+
+def _states(sim: _Simulator, grid: ThermalGrid, measured: Mapping[str, np.ndarray], p) -> np.ndarray:
+    """Every node at the kept samples (nodes x samples); ``p``: numbers, or an MX symbol."""
+    x0 = np.array([measured[n][0] if n in measured else grid.measured_c[0] for n in sim.nodes])
+    after = sim.step.mapaccum(grid.inputs.shape[1])(x0, grid.inputs, p)
+    return ca.horzcat(ca.DM(x0), after[:, [int(k) for k in grid.output_index]])
+
+
+def _predict(sim: _Simulator, grid: ThermalGrid, measured: Mapping[str, np.ndarray]) -> np.ndarray:
+    return np.asarray(_states(sim, grid, measured, []), float)
+
+
+def _band(params: JointParameters, sim: _Simulator, grid, measured, nominal: np.ndarray,
+          others: Sequence[np.ndarray]) -> float:
+    """The widest spread of the sensor's prediction over this recording: first-order in the
+    ``[uncertainty]`` intervals, widened by the alternatives' predictions ``others`` (module docstring)."""
+    lower, upper = nominal.copy(), nominal.copy()
+    if sim.paths:
+        p = ca.MX.sym("p", len(sim.paths))
+        y = _states(sim, grid, measured, p)[sim.nodes.index(sim.sensor), :]
+        x = np.array([params.value(k) for k in sim.paths])
+        jac = np.asarray(ca.Function("sensitivity", [p], [ca.jacobian(y, p)])(x), float)
+        lo, hi = (np.array([params.scope.uncertainty[k][j] for k in sim.paths]) - x for j in (0, 1))
+        lower += np.minimum(jac * lo, jac * hi).sum(axis=1)
+        upper += np.maximum(jac * lo, jac * hi).sum(axis=1)
+    for other in others:
+        lower, upper = np.minimum(lower, other), np.maximum(upper, other)
+    return float(np.max(upper - lower))
+
+
+def _prediction(params: JointParameters, rec: Recording, grid: ThermalGrid, sims: Sequence[_Simulator],
+                alternatives: Sequence[_Simulator]) -> tuple[Prediction, list[np.ndarray]]:
+    """The file's prediction of one recording (``sims``: nominal, and with the uncertain values as
+    parameters), and each alternative's sensor prediction."""
+    nominal, uncertain = sims
+    measured = _measured(rec, grid, nominal)
+    states = _predict(nominal, grid, measured)
+    sensor = states[nominal.nodes.index(nominal.sensor)]
+    others = [_predict(a, grid, measured)[a.nodes.index(a.sensor)] for a in alternatives]
+    band = _band(params, uncertain, grid, measured, sensor, others) if np.all(np.isfinite(sensor)) else math.nan
+    nodes = {n: (m, states[nominal.nodes.index(n)]) for n, m in measured.items()}
+    return Prediction(grid.name, grid.time_s, grid.measured_c, sensor, nodes, band), others
 
 
 def validate_thermal(recordings, parameters: JointParameters | str | Path,
                      settings: ValidateSettings | None = None, rows: dict | None = None) -> Validation:
-    """Predict ``recordings`` (``current_a``, ``temperature_c``; ``velocity`` and ``ambient_c`` when
-    logged) with the parameter file ``parameters`` as it is; report the error per recording."""
+    """Predict ``recordings`` (``current_a``, ``temperature_c``; ``velocity``, ``ambient_c`` and
+    ``node_<name>_c`` when logged) with the parameter file ``parameters`` as it is; report the error per
+    recording and per sensor, the envelope check, the alternatives and the band (module docstring)."""
     settings = settings or ValidateSettings()
     params = load_joint_parameters(parameters)
     recs = as_recordings(recordings, "validate")
     grid_settings = ThermalSettings(min_step_s=settings.grid_s, max_step_s=settings.grid_s, voltage_thermometry=False)
     grids = [thermal_grid(r, params, grid_settings) for r in recs]
-    step, sensor = _simulator(params)
+    sims = (_simulator(params), _simulator(params, tuple(params.scope.uncertainty)))
+    alts = [_simulator(params.alternative(k)) for k in range(len(params.scope.alternatives))]
+    results = [_prediction(params, r, g, sims, alts) for r, g in zip(recs, grids)]
+    scores = tuple(AlternativeScore(a.terms, _rmse([others[k] - g.measured_c for (_, others), g in zip(results, grids)]))
+                   for k, a in enumerate(params.scope.alternatives))
     name = parameters if isinstance(parameters, (str, Path)) else params.path
-    result = Validation(str(name), tuple(_predict(step, sensor, g) for g in grids),
-                        rows or {"used": sum(len(r) for r in recs), "skipped": 0, "segments": len(recs)})
+    result = Validation(str(name), tuple(p for p, _ in results),
+                        rows or {"used": sum(len(r) for r in recs), "skipped": 0, "segments": len(recs)},
+                        check_envelope(params.scope.envelope, recs, settings.envelope_tolerance), scores)
     if not result.success:
         log.warning("%s: %s", result.model, result.message)
     return result

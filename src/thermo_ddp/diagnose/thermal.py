@@ -57,6 +57,7 @@ from tqdm.auto import tqdm
 from .._config import require
 from ..identify.thermal import THERMAL_TERMS, JointParameters, ThermalFit, canonical_terms, load_joint_parameters
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
+from ..model.parameters import HEAT_SOURCE_KINDS
 from ..recordings import as_recordings, read_recordings
 from ._thermal_fitter import _Fitter, _noise, _series
 from ._thermal_localise import ThermalLocaliseSettings, ThermalRegimeSettings, locate_thermal, thermal_regimes
@@ -103,11 +104,16 @@ class ThermalDiagnosisSettings:
         require(self.min_span_s >= 0, name, "min_span_s", self.min_span_s, "must be >= 0")
 
 
-def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid]) -> tuple[list[str], list[dict]]:
+def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid],
+                       allowed: Sequence[str]) -> tuple[list[str], list[dict]]:
+    """The candidates these data can test; a heat source the motor cannot have ([hardware] heat_sources,
+    ``allowed``) is never named."""
     usable, skipped = [], []
     moving = any(g.has_velocity and np.any(np.abs(g.velocity) > MOVING_RAD_S) for g in grids)
     for term in candidates:
         require(term in THERMAL_TERMS, "diagnose", "term", term, f"unknown; known: {', '.join(THERMAL_TERMS)}")
+        if term in HEAT_SOURCE_KINDS and term not in allowed:
+            continue
         if term in SPEED_TERMS and not moving:
             skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
                             "experiment": EXPERIMENTS[term]})
@@ -281,7 +287,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     if several_sensors(params, grids):
         return diagnose_network(params, grids, settings=settings.growth, window_s=settings.localise.noise_window_s,
                                 rows=rows, progress=settings.progress)
-    usable, skipped = _usable_candidates(candidates, grids)
+    usable, skipped = _usable_candidates(candidates, grids, params.scope.allowed_sources)
     base = frozenset()
     if "drive_heating" in usable and not any(g.has_ambient for g in grids):
         usable.remove("drive_heating")

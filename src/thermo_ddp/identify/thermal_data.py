@@ -104,7 +104,7 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
                  sensor: str | None = None) -> ThermalGrid:
     """Validate ``rec`` (needs ``current_a`` and ``temperature_c``) and build its integration grid.
     ``sensors`` holds ``temperature_c`` under ``sensor`` (default: the file's sensor node) and every
-    further measured node (``node_<name>_c``)."""
+    further measured node (:attr:`Recording.sensors`, ``node_<name>_c``)."""
     settings = settings or ThermalSettings()
     rec.require("current_a", "temperature_c")
     src = rec.source or rec.name
@@ -126,15 +126,11 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
     thermometry = _thermometry(rec, params, settings, v, keep) if settings.voltage_thermometry else (None, None)
     measured = {sensor or params.thermal.sensor_node: np.asarray(rec.temperature_c, float)[keep]}
-    measured |= {node: np.asarray(values, float)[keep] for node, values in node_sensors(rec).items()}
+    measured |= {node: np.asarray(values, float)[keep] for node, values in rec.sensors.items()}
     return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
                        inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry,
                        speed_source=speed_source, sensors=measured, ambient_c=ambient[keep])
 
-
-def node_sensors(rec: Recording) -> dict[str, np.ndarray]:
-    """The recording's further measured nodes (``node_<name>_c``), by node name."""
-    return dict(getattr(rec, "sensors", None) or {})  # MERGE: real-a field
 
 
 def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,
@@ -155,9 +151,7 @@ def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,
         if b - a < min_samples:
             skipped += int(b - a)
             continue
-        columns = {f.name: getattr(rec, f.name)[a:b] for f in dataclasses.fields(rec)
-                   if isinstance(getattr(rec, f.name), np.ndarray)}
-        parts.append(dataclasses.replace(rec, name=f"{rec.name}[{k}]", row_offset=rec.row_offset + int(a), **columns))
+        parts.append(dataclasses.replace(rec.take(slice(int(a), int(b))), name=f"{rec.name}[{k}]"))
     return parts, skipped
 
 

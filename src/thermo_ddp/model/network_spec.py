@@ -168,7 +168,8 @@ def _only_keys(source: str, where: str, table: Mapping[str, Any], known: tuple[s
             raise InputError(source, f"{where}.{key}", table[key], f"unknown key (typo?); known: {', '.join(known)}")
 
 
-def _node_name(source: str, where: str, name: Any) -> str:
+def check_node_name(source: str, where: str, name: Any) -> str:
+    """``name`` when it is a valid node name (an identifier other than ``ambient``); InputError otherwise."""
     if not isinstance(name, str) or not name.isidentifier() or name == AMBIENT:
         raise InputError(source, where, repr(name), "a node name is a valid identifier (letters, digits, _; not "
                          f"starting with a digit) other than {AMBIENT!r}")
@@ -179,7 +180,7 @@ def _read_nodes(source: str, sec: Mapping[str, Any]) -> tuple[NodeSpec, ...]:
     nodes = []
     for k, table in enumerate(_table_list(source, sec, "node")):
         _only_keys(source, f"thermal.node[{k}]", table, ("name", "capacity_j_per_k"))
-        name = _node_name(source, f"thermal.node[{k}].name", table.get("name"))
+        name = check_node_name(source, f"thermal.node[{k}].name", table.get("name"))
         if name in (n.name for n in nodes):
             raise InputError(source, f"thermal.node[{k}].name", name, "a node appears twice")
         if "capacity_j_per_k" not in table:

@@ -175,6 +175,11 @@ class JointParameters:
         """This file validated as if read (InputError naming ``source``, by default its path)."""
         return dataclasses.replace(parameters_from_dict(self.to_dict(), source or self.path), path=self.path)
 
+    def with_scope(self, **sections) -> "JointParameters":
+        """A copy with sections of its :class:`Scope` replaced (``heat_sources``, ``uncertainty``, ``envelope``,
+        ``alternatives``: what identify and diagnose write), validated as if read."""
+        return dataclasses.replace(self, scope=dataclasses.replace(self.scope, **sections)).checked()
+
     def alternative(self, index: int) -> "JointParameters":
         """The file with alternative ``index``'s values (validated when the file was read); no alternatives."""
         alt = self.scope.alternatives[index]

@@ -55,10 +55,18 @@ class HeatSource:
     def power_w(self, powers: Mapping[str, object]):
         if self.name is None:
             return self.constant_w
-        driver = powers[self.feature] if self.feature in powers else powers[self.name] ** self.exponent
+        driver = powers[self.feature] if self.feature in powers else _power(powers[self.name], self.exponent)
         if not (isinstance(self.reference, (int, float)) and self.reference == 1):
             driver = driver / self.reference ** self.exponent
         return self.constant_w + self.gain * driver
+
+
+def _power(x, exponent):
+    """``x ** exponent`` of a non-negative driver; with a symbolic exponent 0 where x = 0, so that its
+    derivative in the exponent (x^n log x) is 0 there, not NaN (a motor at rest)."""
+    if isinstance(exponent, (int, float)):
+        return x ** exponent
+    return ca.if_else(x > 0, x ** exponent, 0)
 
 
 def feature_key(name: str, exponent: float = 1.0) -> str:
