@@ -23,6 +23,7 @@ from ..model.thermal import HeatSource, Link, ThermalNetwork, feature_key, heat_
 PREFIX = "thermal."
 IRON_EXPONENT_RANGE = (1.0, 2.5)  # catalogue's iron_loss_speed_exponent: hysteresis (1) to eddy and excess (2.5)
 SPEED_EXPONENTS = (1.0, 1.5, 2.0, 2.5)
+TINY = 1e-12  # keeps log(0) finite at rest: the interpolated driver is then ~1e-12, a heat of nothing
 FIXED_VALUES = ("ref_speed_rad_s", "motor_fraction")  # source values a fit never frees
 
 
@@ -45,14 +46,15 @@ def iron_feature_key(label: str) -> str:
 
 
 def iron_feature(held: Mapping[str, object], exponent, ref_speed_rad_s):
-    """Held mean of (|w| / w_ref)^n from the held means of |w|^e at :data:`SPEED_EXPONENTS` (hat-function
-    interpolation in n; ``exponent`` may be a CasADi symbol)."""
-    out = 0
+    """Held mean of (|w| / w_ref)^n from the held means m_e of (|w| / w_ref)^e at :data:`SPEED_EXPONENTS`:
+    geometric interpolation between the two lattice exponents around n, m_lo^(1 - a) m_hi^a, exact for a
+    speed held constant over the interval (``exponent`` may be a CasADi symbol)."""
+    log_mean = 0
     spacing = SPEED_EXPONENTS[1] - SPEED_EXPONENTS[0]
     for e in SPEED_EXPONENTS:
         weight = ca.fmax(0, 1 - ca.fabs(exponent - e) / spacing)
-        out = out + weight * held[feature_key("speed_abs_rad_s", e)] / ref_speed_rad_s ** e
-    return out
+        log_mean = log_mean + weight * ca.log(held[feature_key("speed_abs_rad_s", e)] / ref_speed_rad_s ** e + TINY)
+    return ca.exp(log_mean)
 
 
 def identification_network(spec: NetworkSpec, sensor: str) -> ThermalNetwork:
