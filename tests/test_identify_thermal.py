@@ -230,3 +230,71 @@ def test_speed_regressor_says_where_it_comes_from_and_gaps_split_the_recording()
     parts, skipped = split_at_gaps(Recording(name="g", position=q, **base))
     assert [p.name for p in parts] == ["g[0]", "g[1]"] and skipped == 5   # a 300 s gap; a 5-sample tail left out
     assert parts[1].time_s[0] == 900.0 and np.array_equal(parts[1].position, q[600:1200])
+
+
+# ----------------------------------------------------------------------------- general networks, several sensors
+def _network_truth_fit(seed: int = 1):
+    from thermo_ddp.identify.network import free_paths
+    from thermo_ddp.identify.network_fit import fit_network
+    from thermo_ddp.diagnose.growth import Ranges
+    from thermo_ddp.model.network_spec import LinkSpec, NetworkSpec, NodeSpec, SourceSpec
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+    from thermo_ddp.testing.testbed.truths import network_case
+
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    train, _, truth = network_case(seed, "chain3_iron")
+    grid = thermal_grid(train, params, ThermalSettings(min_step_s=10.0, max_step_s=10.0))
+    c = truth.capacity_j_per_k
+    # the truth's structure, every value started 20-40 % off and the iron loss's share and exponent free
+    spec = NetworkSpec(
+        (NodeSpec("winding", 1.4 * c[0]), NodeSpec("tooth", 0.7 * c[1]), NodeSpec("yoke", 1.3 * c[2])),
+        (LinkSpec(("winding", "tooth"), 1.3 * truth.winding_tooth_k_per_w),
+         LinkSpec(("tooth", "yoke"), 0.8 * truth.tooth_yoke_k_per_w),
+         LinkSpec(("yoke", "ambient"), 1.2 * truth.yoke_coolant_k_per_w)),
+        (SourceSpec("copper", {"winding": 1.0}, {}),
+         SourceSpec("iron_losses", {"tooth": 0.5, "yoke": 0.5},
+                    {"power_w": 300.0, "speed_exponent": 2.0, "ref_speed_rad_s": truth.ref_speed_rad_s})))
+    ranges = Ranges((1.0, 1e6), 1e4, params.motor.current_nominal_a)
+    fit = fit_network(params, spec, "winding", tuple(ranges.free(p) for p in free_paths(spec)), [grid])
+    return fit, truth, grid
+
+
+def test_network_fit_recovers_a_three_node_truth_on_every_sensor():
+    """Oracle: a numpy three-node truth integrated exactly on a 1 s step (testing.testbed.truths), three sensors
+    with 0.05 K noise; the fit's 10 s trapezoidal grid recovers it within its discretisation (2 %)."""
+    fit, truth, grid = _network_truth_fit()
+    assert fit.success, fit.message
+    c = truth.capacity_j_per_k
+    expected = {"thermal.node.winding.capacity_j_per_k": c[0], "thermal.node.tooth.capacity_j_per_k": c[1],
+                "thermal.node.yoke.capacity_j_per_k": c[2],
+                "thermal.link.winding-tooth.resistance_k_per_w": truth.winding_tooth_k_per_w,
+                "thermal.link.tooth-yoke.resistance_k_per_w": truth.tooth_yoke_k_per_w,
+                "thermal.link.yoke-ambient.resistance_k_per_w": truth.yoke_coolant_k_per_w,
+                "thermal.source.iron_losses.power_w": truth.iron_w,
+                "thermal.source.iron_losses.split.yoke": truth.iron_split[1]}
+    for path, value in expected.items():
+        assert fit.values[path] == pytest.approx(value, rel=0.04), path
+    assert fit.values["thermal.source.iron_losses.speed_exponent"] == pytest.approx(truth.iron_exponent, abs=0.03)
+    # each sensor weighted by its own noise, estimated from second differences of its readings
+    assert set(fit.noise_c) == {"winding", "tooth", "yoke"}
+    assert all(0.04 < s < 0.065 for s in fit.noise_c.values()), fit.noise_c
+    assert all(r < 1.3 * 0.05 for r in fit.per_sensor().values()), fit.per_sensor()
+
+
+def test_network_fit_uncertainty_by_dotted_path_is_written_and_read_back():
+    """[uncertainty] (95 % interval of every fitted value) and [envelope] written into a network file that
+    the parameter reader accepts: every interval holds its value."""
+    from thermo_ddp.diagnose.network_diagnosis import envelope, network_section
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+
+    fit, truth, grid = _network_truth_fit()
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    data = params.to_dict() | {"thermal": network_section(fit.spec, 25.0, "winding"),
+                               "uncertainty": fit.uncertainty(), "envelope": envelope([grid])}
+    back = parameters_from_dict(data, "written")
+    assert set(back.scope.uncertainty) == set(fit.values)
+    for path, (lo, hi) in back.scope.uncertainty.items():
+        assert lo <= back.value(path) <= hi and hi > lo, path
+    speeds = np.abs(grid.velocity)
+    assert back.scope.envelope["speed_rad_s"] == (speeds.min(), speeds.max())
+    assert speeds.max() <= 400.0 and back.scope.envelope["ambient_c"][0] == pytest.approx(25.0, abs=0.2)

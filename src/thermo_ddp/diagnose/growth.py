@@ -11,12 +11,13 @@ values (every sensor at once, each weighted by its noise, :func:`~thermo_ddp.ide
   heated by its own losses, seen by the stator through the air gap);
 - a heat source of a kind the motor can have (``[hardware] heat_sources``): ``iron_losses``
   P_ref (|w| / w_ref)^n with n fitted in 1-2.5, ``friction_heating``, ``drive_heating``, ``constant``,
-  at one node.
+  at one node, or a source already there spread to one more node (its shares fitted).
 
 An addition is accepted by today's statistics (:mod:`~thermo_ddp.diagnose.selection`): the nested
 likelihood-ratio test with the sample size corrected for the residual autocorrelation, Bonferroni over the
 additions tried at that step, and a relative drop of the noise-weighted RMSE of at least ``min_rmse_drop``;
-the best accepted one is then judged leaving one segment out (with several segments): it is withdrawn when
+among the accepted ones that the test cannot tell from the best, a heat source listed earlier in
+``heat_sources`` goes first; that one is then judged leaving one segment out (with several segments): it is withdrawn when
 the held-out RMSE of the limit node (the winding) is higher with it than without, beyond the noise of one
 reading.  Growth stops when every sensor's RMSE is within ``max_noise_ratio`` of its residual noise (``ok``)
 or when nothing allowed helps (``model_does_not_fit``, honestly).  Heat sources of another kind that fit
@@ -97,6 +98,8 @@ class Ranges:
             return Free(path, *IRON_EXPONENT_RANGE, log=False)
         if name == "loss_w_per_a2":
             return Free(path, 0.0, self.heat_max_w / self.current_nominal_a ** 2, log=False)
+        if ".split." in path:
+            return Free(path, 0.0, 1.0, log=False)
         if name in ("linear_w_s_per_rad", "quadratic_w_s2_per_rad2"):
             return Free(path, 0.0, math.inf, log=False)
         return Free(path, 0.0, self.heat_max_w, log=False)
@@ -137,6 +140,10 @@ def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed:
         for node in spec.node_names:
             src = SourceSpec(kind, {node: 1.0}, _start_values(kind, heat_w, ref_speed))
             out.append(Addition(kind, node, with_source(spec, src)))
+    for src in (s for s in spec.sources if s.kind in kinds):
+        for node in (n for n in spec.node_names if n not in src.split):
+            split = {n: 0.7 * share for n, share in src.split.items()} | {node: 0.3}
+            out.append(Addition(src.kind, f"{node} (spread)", with_source(spec, dataclasses.replace(src, split=split))))
     hidden = f"node{len(spec.nodes)}"
     for where, grown in node_placements(spec, hidden):
         if where.startswith("between"):
@@ -152,12 +159,14 @@ def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed:
 class GrowthSettings:
     """``selection``: level and effect size of the nested tests; ``max_noise_ratio``: a sensor is explained
     when its RMSE is within this many residual-noise standard deviations; ``max_steps``: additions at most;
-    ``max_nfev``: optimiser evaluations per fit."""
+    ``screen_nfev``: optimiser evaluations of each addition tried (from the current values); ``max_nfev``: of
+    the accepted one, refitted."""
 
     selection: SubsetSettings = SubsetSettings()
     max_noise_ratio: float = 3.0
-    max_steps: int = 5
-    max_nfev: int = 60
+    max_steps: int = 6
+    screen_nfev: int = 25
+    max_nfev: int = 80
 
 
 class Grower:
@@ -179,9 +188,10 @@ class Grower:
         self.noise = {n: sensor_noise(grids, n) for n in sensors}
         self._folds: dict[str, list[np.ndarray]] = {}
 
-    def fit(self, spec: NetworkSpec, weights: Sequence[float] | None = None) -> NetworkFit:
+    def fit(self, spec: NetworkSpec, weights: Sequence[float] | None = None, screen: bool = False) -> NetworkFit:
+        nfev = self.settings.screen_nfev if screen else self.settings.max_nfev
         fit = fit_network(self.params, spec, self.sensor, self.ranges.all(spec), self.grids, weights=weights,
-                          noise=self.noise, max_nfev=self.settings.max_nfev)
+                          noise=self.noise, max_nfev=nfev)
         if self.progress is not None:
             self.progress.update(1)
         return fit
@@ -206,19 +216,35 @@ class Grower:
         """Fit every addition to ``fit``'s network; the best one that passes the tests (None if none)."""
         tried = []
         for addition in additions(fit.spec, self.kinds, 0.1 * self.heat_max_w, self.ref_speed):
-            new = self.fit(addition.spec)
+            new = self.fit(addition.spec, screen=True)
             if new.success:
                 tried.append((dataclasses.replace(addition, spec=new.spec), new))
         base, s = subset_fit(fit), self.settings.selection
         tests = [(a, f, nested_test(base, subset_fit(f, frozenset({a.term})))) for a, f in tried]
-        passing = sorted((t for t in tests if t[2].significant(s.alpha, len(tests), s.min_rmse_drop)),
-                         key=lambda t: t[1].rss)
-        for addition, new, test in passing:
+        passing = [t for t in tests if t[2].significant(s.alpha, len(tests), s.min_rmse_drop)]
+        for addition, new, test in self.preferred(passing, len(tests)):
+            new = min((new, self.fit(new.spec)), key=lambda f: (not f.success, f.rss))
+            test = nested_test(base, subset_fit(new, frozenset({addition.term})))
             check = self.held_out(addition.term, new.spec, fit.spec) if len(self.grids) > 1 else None
             if check is None or not check.withdraws:
                 return Step(addition, new, test, check, len(tests)), tried
             log.info("%s withdrawn: %s", addition.label, check)
         return None, tried
+
+    def preferred(self, passing: list, n_tests: int) -> list:
+        """Passing additions, best first: among those the nested test cannot tell from the best fit, the heat
+        source listed first in the motor's ``heat_sources`` (the file's order says what this motor has
+        most), then the smallest residual."""
+        if not passing:
+            return []
+        s = self.settings.selection
+        best = min(passing, key=lambda t: t[1].rss)
+        rank = {kind: k for k, kind in enumerate(self.kinds)}
+
+        def tied(t) -> bool:
+            return t is best or not nested_test(subset_fit(t[1]), subset_fit(best[1], frozenset({"best"}))).significant(
+                s.alpha, n_tests, s.min_rmse_drop)
+        return sorted(passing, key=lambda t: (not tied(t), rank.get(t[0].term, len(rank)), t[1].rss))
 
     def folds(self, spec: NetworkSpec) -> list[np.ndarray]:
         """Leave one segment out: the limit node's residual of each segment predicted by a fit of the others."""

@@ -19,7 +19,7 @@ from ..identify.network_fit import NetworkFit
 from ..identify.thermal_data import ThermalGrid
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
-from .growth import Addition, GrowthSettings, Grower, Step, subset_fit
+from .growth import HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
 from .localise import ResidualSeries
 from .selection import nested_test
 
@@ -190,6 +190,8 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
     out = []
     tested = [s for s in steps if s.test is not None]
     for step, tried in zip(tested, tries):
+        if step.addition.term not in HEAT_KINDS or step.addition.where.endswith("(spread)"):
+            continue
         chosen = step.fit
         for addition, fit in tried:
             if addition.term in (step.addition.term, "sink_node", "source_node", "sensor_node"):

@@ -28,8 +28,10 @@ FIXED_VALUES = ("ref_speed_rad_s", "motor_fraction")  # source values a fit neve
 
 
 def free_paths(spec: NetworkSpec) -> tuple[str, ...]:
-    """Every capacity, resistance and source value of ``spec`` a fit may free (not splits, not fixed values)."""
-    return tuple(PREFIX + tail for tail in spec.paths() if ".split." not in tail
+    """Every capacity, resistance and source value of ``spec`` a fit may free (not fixed values), and the
+    shares of a split over several nodes but the first (whose share is the rest, :func:`with_values`)."""
+    firsts = {f"source.{s.label}.split.{next(iter(s.split))}" for s in spec.sources}
+    return tuple(PREFIX + tail for tail in spec.paths() if tail not in firsts
                  and tail.rsplit(".", 1)[1] not in FIXED_VALUES)
 
 
@@ -38,7 +40,15 @@ def values_of(spec: NetworkSpec) -> dict[str, object]:
 
 
 def with_values(spec: NetworkSpec, values: Mapping[str, object]) -> NetworkSpec:
-    return spec.with_values({p[len(PREFIX):]: v for p, v in values.items()})
+    """``spec`` with the values at ``values``' paths; the first node of each split takes the share the
+    others leave (shares sum to 1 for numbers and symbols alike)."""
+    spec = spec.with_values({p[len(PREFIX):]: v for p, v in values.items()})
+    rest = {}
+    for s in spec.sources:
+        first, *others = s.split
+        if others:
+            rest[f"source.{s.label}.split.{first}"] = 1 - sum(s.split[n] for n in others)
+    return spec.with_values(rest) if rest else spec
 
 
 def iron_feature_key(label: str) -> str:
