@@ -9,7 +9,8 @@ import pytest
 from scipy.optimize import curve_fit
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.identify.thermal import (ThermalModel, ThermalSettings, identify_thermal, identify_thermal_files,
+from thermo_ddp.identify.thermal_files import identify_thermal_files
+from thermo_ddp.identify.thermal import (ThermalModel, ThermalSettings, identify_thermal,
                                          load_joint_parameters, thermal_grid)
 from thermo_ddp.model.parameters import parameters_from_dict
 from thermo_ddp.recordings import Recording
@@ -163,6 +164,11 @@ def test_csv_entry_point_returns_a_loadable_parameter_file(tmp_path):
     loaded = parameters_from_dict(out["parameter_file"])
     assert loaded.thermal.model == "one_node"
     assert loaded.thermal["capacity_j_per_k"] == out["parameters"]["capacity_j_per_k"]
+    # the file says how well each value is known and where it was identified
+    lo, hi = loaded.scope.uncertainty["thermal.capacity_j_per_k"]
+    assert lo < loaded.thermal["capacity_j_per_k"] < hi
+    assert set(loaded.scope.uncertainty) == {"thermal.capacity_j_per_k", "thermal.resistance_k_per_w"}
+    assert loaded.scope.envelope["current_a"][1] == pytest.approx(np.abs(rec.to_recording().current_a).max())
     bad = tmp_path / "no_temp.csv"
     rec.to_csv(bad, columns=("time_s", "current_a"))
     with pytest.raises(InputError, match="temperature_c"):

@@ -102,7 +102,7 @@ class ThermalDiagnosis:
     def parameter_file(self) -> dict | None:
         if self.final_fit is None or not self.final_fit.success:
             return None
-        return parameter_file(self.params, self.final_fit, self.recordings)
+        return parameter_file(self.params, self.final_fit, self.recordings, self.grids)
 
     def term_report(self, term: str) -> dict:
         """The contract's ``missing_physics`` entry of a named term."""

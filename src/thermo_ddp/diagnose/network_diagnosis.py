@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 from .._figures import new_figure
 from ..model.network_spec import NetworkSpec
 from ..identify.network_fit import NetworkFit
-from ..identify.thermal_data import ThermalGrid
+from ..identify.thermal_data import ThermalGrid, envelope
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
 from .growth import HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
@@ -39,17 +39,6 @@ def residual_noise(grids: Sequence[ThermalGrid], window_s: float):
             out[node] = max(math.sqrt(float(np.mean(parts))), fit.noise_c[node])
         return out
     return noise
-
-
-def envelope(grids: Sequence[ThermalGrid]) -> dict[str, list[float]]:
-    """The operating range the recordings cover (the file's ``[envelope]``)."""
-    def span(values) -> list[float]:
-        v = np.concatenate(values)
-        return [float(np.min(v)), float(np.max(v))]
-    return {"current_a": span([np.abs(g.current_a) for g in grids]),
-            "speed_rad_s": span([np.abs(g.velocity) for g in grids]),
-            "ambient_c": span([g.ambient_c for g in grids]),
-            "temperature_c": span([g.measured_c for g in grids])}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -224,7 +224,7 @@ def fit_network(params: JointParameters, spec: NetworkSpec, sensor: str, free: S
     if free:
         try:
             sol = optimize.least_squares(lambda t: evaluate(t)[0], np.clip(theta0, lo, hi), lambda t: evaluate(t)[1],
-                                         bounds=(lo, hi), method="trf", x_scale=1.0, max_nfev=max_nfev,
+                                         bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
                                          ftol=1e-6, xtol=1e-8, gtol=1e-8)
         except ValueError as err:
             return NetworkFit(spec, sensor, tuple(free), {}, {}, {}, noise, 1.0, False, "not_finite",
