@@ -49,10 +49,8 @@ def regime_gains(before: ThermalFit, after: ThermalFit, localisation: Localisati
 
 
 @dataclasses.dataclass(frozen=True)
-class ThermalDiagnosis:
-    """Result of :func:`diagnose_thermal`; ``to_dict()`` is the contract's diagnosis JSON plus
-    ``parameter_file`` (the improved parameter sections, loadable with ``parameters_from_dict``),
-    ``speed_source`` and ``noise``.  ``fits`` holds every fitted term set (empty without data)."""
+class ThermalOutcome:
+    """What every thermal diagnosis holds first: the recordings, the parameter file, their grids, the verdict."""
 
     recordings: tuple[str, ...]
     params: JointParameters
@@ -60,6 +58,14 @@ class ThermalDiagnosis:
     success: bool
     status: str
     message: str
+
+
+@dataclasses.dataclass(frozen=True)
+class ThermalDiagnosis(ThermalOutcome):
+    """Result of :func:`diagnose_thermal`; ``to_dict()`` is the contract's diagnosis JSON plus
+    ``parameter_file`` (the improved parameter sections, loadable with ``parameters_from_dict``),
+    ``speed_source`` and ``noise``.  ``fits`` holds every fitted term set (empty without data)."""
+
     rows: Mapping[str, int] = dataclasses.field(default_factory=dict)  # the contract's rows: used, skipped, segments
     regimes: tuple[np.ndarray, ...] = ()
     selection: SubsetSelection | None = None

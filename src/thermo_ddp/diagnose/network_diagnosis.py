@@ -19,6 +19,7 @@ from ..identify.network_fit import NetworkFit
 from ..identify.thermal_data import ThermalGrid, envelope
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
+from ._thermal_result import ThermalOutcome
 from .growth import HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
 from .localise import ResidualSeries
 from .selection import nested_test
@@ -42,15 +43,9 @@ def residual_noise(grids: Sequence[ThermalGrid], window_s: float):
 
 
 @dataclasses.dataclass(frozen=True)
-class NetworkDiagnosis:
+class NetworkDiagnosis(ThermalOutcome):
     """Result of :func:`diagnose_network`; ``to_dict()`` is the contract's diagnosis JSON."""
 
-    recordings: tuple[str, ...]
-    params: JointParameters
-    grids: tuple[ThermalGrid, ...]
-    success: bool
-    status: str
-    message: str
     baseline: NetworkFit
     final: NetworkFit
     steps: tuple[Step, ...]
