@@ -262,13 +262,13 @@ def _network_truth_fit(seed: int = 1):
                     {"power_w": 300.0, "speed_exponent": 2.0, "ref_speed_rad_s": truth.ref_speed_rad_s})))
     ranges = Ranges((1.0, 1e6), 1e4, params.motor.current_nominal_a)
     fit = fit_network(params, spec, "winding", tuple(ranges.free(p) for p in free_paths(spec)), [grid])
-    return fit, truth, grid
+    return fit, truth, grid, train
 
 
 def test_network_fit_recovers_a_three_node_truth_on_every_sensor():
     """Oracle: a numpy three-node truth integrated exactly on a 1 s step (testing.testbed.truths), three sensors
     with 0.05 K noise; the fit's 10 s trapezoidal grid recovers it within its discretisation (2 %)."""
-    fit, truth, grid = _network_truth_fit()
+    fit, truth, grid, _ = _network_truth_fit()
     assert fit.success, fit.message
     c = truth.capacity_j_per_k
     expected = {"thermal.node.winding.capacity_j_per_k": c[0], "thermal.node.tooth.capacity_j_per_k": c[1],
@@ -290,17 +290,18 @@ def test_network_fit_recovers_a_three_node_truth_on_every_sensor():
 def test_network_fit_uncertainty_by_dotted_path_is_written_and_read_back():
     """[uncertainty] (95 % interval of every fitted value) and [envelope] written into a network file that
     the parameter reader accepts: every interval holds its value."""
-    from thermo_ddp.diagnose.network_diagnosis import envelope, network_section
+    from thermo_ddp.diagnose.network_diagnosis import network_section
+    from thermo_ddp.envelope import envelope_of
     from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
 
-    fit, truth, grid = _network_truth_fit()
+    fit, truth, grid, train = _network_truth_fit()
     params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
-    data = params.to_dict() | {"thermal": network_section(fit.spec, 25.0, "winding"),
-                               "uncertainty": fit.uncertainty(), "envelope": envelope([grid])}
+    data = params.to_dict() | {"thermal": network_section(fit.spec, 25.0, "winding"), "uncertainty": fit.uncertainty(),
+                               "envelope": {k: list(v) for k, v in envelope_of([train]).items()}}
     back = parameters_from_dict(data, "written")
     assert set(back.scope.uncertainty) == set(fit.values)
     for path, (lo, hi) in back.scope.uncertainty.items():
         assert lo <= back.value(path) <= hi and hi > lo, path
-    speeds = np.abs(grid.velocity)
+    speeds = np.abs(train.velocity)
     assert back.scope.envelope["speed_rad_s"] == (speeds.min(), speeds.max())
     assert speeds.max() <= 400.0 and back.scope.envelope["ambient_c"][0] == pytest.approx(25.0, abs=0.2)

@@ -79,6 +79,7 @@ class ThermalDiagnosis(ThermalOutcome):
     baseline_terms: frozenset = frozenset()  # in every fitted set, never tested (the room's stand-in, see ROOM_NOTE)
     held_out: Mapping[str, HeldOutCheck] = dataclasses.field(default_factory=dict)  # leave one segment out, per term
     segment_cv: tuple[float, float, tuple[str, ...]] | None = None  # leave one segment out: baseline, final, segments
+    envelope: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # what the recordings cover
 
     @property
     def final_terms(self) -> frozenset:
@@ -108,7 +109,7 @@ class ThermalDiagnosis(ThermalOutcome):
     def parameter_file(self) -> dict | None:
         if self.final_fit is None or not self.final_fit.success:
             return None
-        return parameter_file(self.params, self.final_fit, self.recordings, self.grids)
+        return parameter_file(self.params, self.final_fit, self.recordings, self.envelope)
 
     def term_report(self, term: str) -> dict:
         """The contract's ``missing_physics`` entry of a named term."""

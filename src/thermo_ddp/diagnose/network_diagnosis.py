@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 from .._figures import new_figure
 from ..model.network_spec import NetworkSpec
 from ..identify.network_fit import NetworkFit
-from ..identify.thermal_data import ThermalGrid, envelope
+from ..identify.thermal_data import ThermalGrid
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
 from ._thermal_result import ThermalOutcome
@@ -53,6 +53,7 @@ class NetworkDiagnosis(ThermalOutcome):
     validation: tuple[float, float] | None = None  # held-out winding RMSE: baseline, final
     residual_sigma: dict = dataclasses.field(default_factory=dict)
     rows: dict = dataclasses.field(default_factory=dict)
+    envelope: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # what the recordings cover
 
     @property
     def missing_physics(self) -> list[str]:
@@ -98,7 +99,7 @@ class NetworkDiagnosis(ThermalOutcome):
         data = self.params.to_dict()
         data["thermal"] = network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor)
         data["uncertainty"] = self.final.uncertainty()
-        data["envelope"] = envelope(self.grids)
+        data["envelope"] = {k: list(v) for k, v in self.envelope.items()}
         if self.alternatives:
             data["alternatives"] = [{"terms": a["terms"], **a["values"]} for a in self.alternatives]
         where = ", ".join(self.recordings)
@@ -193,8 +194,8 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
 
 
 def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, settings: GrowthSettings | None = None,
-                     window_s: float = 120.0, progress: bool | None = None, rows: dict | None = None
-                     ) -> NetworkDiagnosis:
+                     window_s: float = 120.0, progress: bool | None = None, rows: dict | None = None,
+                     envelope: Mapping[str, tuple[float, float]] | None = None) -> NetworkDiagnosis:
     """Grow the file's network on ``grids`` (every sensor) and judge the result (module docstring);
     ``progress``: a tqdm bar over the fits (None: only on a terminal)."""
     settings = settings or GrowthSettings()
@@ -216,4 +217,5 @@ def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, s
                     f"{', '.join(grower.kinds)}) explains what is left")
     return NetworkDiagnosis(tuple(g.name for g in grids), params, tuple(grids), explained and final.success,
                             "ok" if explained and final.success else "model_does_not_fit", message, baseline, final,
-                            tuple(steps), alternatives(steps, tries, settings), validation, sigma, rows or {})
+                            tuple(steps), alternatives(steps, tries, settings), validation, sigma, rows or {},
+                            envelope or {})

@@ -55,6 +55,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from .._config import require
+from ..envelope import envelope_of
 from ..identify.thermal import THERMAL_TERMS, JointParameters, ThermalFit, canonical_terms, load_joint_parameters
 from ..identify.thermal_data import ThermalGrid, ThermalSettings, split_at_gaps, thermal_grid
 from ..model.parameters import HEAT_SOURCE_KINDS
@@ -286,7 +287,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
                                 cv_blocks=settings.cv_blocks)
     if several_sensors(params, grids):
         return diagnose_network(params, grids, settings=settings.growth, window_s=settings.localise.noise_window_s,
-                                rows=rows, progress=settings.progress)
+                                rows=rows, progress=settings.progress, envelope=envelope_of(recs))
     usable, skipped = _usable_candidates(candidates, grids, params.scope.allowed_sources)
     base = frozenset()
     if "drive_heating" in usable and not any(g.has_ambient for g in grids):
@@ -309,7 +310,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
              + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise, notes, settings.cv_blocks, hosted, base,
-                            held_out, segment_cv)
+                            held_out, segment_cv, envelope_of(recs))
 
 
 def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None = None, columns=None,

@@ -63,7 +63,7 @@ from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, T
 from ..recordings import as_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, correlation, covariance, integrated_autocorrelation
-from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, envelope, thermal_grid
+from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
 
@@ -565,15 +565,15 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
 
 
 def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = (),
-                   grids: Sequence[ThermalGrid] = ()) -> dict:
+                   envelope: Mapping[str, Sequence[float]] | None = None) -> dict:
     """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
     ``iron_losses`` k v^2 is written as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2);
-    [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: what ``grids`` cover
+    [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
     (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
     data["uncertainty"] = {_path(k): [max(lo, 0.0), hi] for k, (lo, hi) in fit.confidence.items()}
-    if grids:
-        data["envelope"] = envelope(grids)
+    if envelope:
+        data["envelope"] = {k: list(v) for k, v in envelope.items()}
     values = dict(fit.parameters)
     model = network_model(fit.terms)
     data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()

@@ -202,15 +202,3 @@ def _drivers(params: JointParameters) -> ca.Function:
     losses = motor.losses_w(params.motor, i, v, params.motor.resistance_ref_c)
     return ca.Function("thermal_drivers", [i, v], [ca.vertcat(*(feature_value(losses, *d) for d in DRIVERS))],
                        ["current_a", "velocity_rad_s"], ["drivers"])
-
-
-def envelope(grids) -> dict[str, list[float]]:
-    """The operating range ``grids`` cover (a parameter file's ``[envelope]``): magnitudes of current and
-    speed, the ambient (the file's when not recorded) and the sensor temperature."""
-    def span(values) -> list[float]:
-        v = np.concatenate(values)
-        return [float(np.min(v)), float(np.max(v))]
-    return {"current_a": span([np.abs(g.current_a) for g in grids]),
-            "speed_rad_s": span([np.abs(g.velocity) for g in grids]),
-            "ambient_c": span([g.ambient_c for g in grids]),
-            "temperature_c": span([g.measured_c for g in grids])}

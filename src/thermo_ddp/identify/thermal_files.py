@@ -11,12 +11,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
+from ..envelope import envelope_of
 from ..model.parameters import JointParameters, ThermalParameters
 from ..recordings import read_recordings
 from .network_fit import Free, fit_network
 from .network import free_paths
 from .thermal import identify_thermal, load_joint_parameters, parameter_file
-from .thermal_data import ThermalSettings, envelope, split_at_gaps, thermal_grid
+from .thermal_data import ThermalSettings, split_at_gaps, thermal_grid
 
 # Identification's search ranges of a network's values (the diagnosis narrows them further).
 _CAPACITY = (1e-3, 1e7)
@@ -43,7 +44,7 @@ def identify_network_files(params: JointParameters, recordings, settings: Therma
     unused = sorted({n for g in grids for n in g.sensors} - set(spec.node_names))
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
     data |= {"thermal": ThermalParameters("network", params.thermal.ambient_c, {}, fit.sensor, network=fit.spec).to_dict(),
-             "uncertainty": fit.uncertainty(), "envelope": envelope(grids)}
+             "uncertainty": fit.uncertainty(), "envelope": {k: list(v) for k, v in envelope_of(recordings).items()}}
     message = fit.message + (f"; sensors without a node in the network, not fitted: {', '.join(unused)} "
                              "(thermo-ddp diagnose adds them)" if unused else "")
     return {"physics": "thermal", "recordings": [g.name for g in grids], "model": "network",
@@ -63,9 +64,8 @@ def identify_thermal_files(paths: Sequence[str | Path], model: str = "one_node",
         return identify_network_files(params, recs, ThermalSettings(min_step_s=10.0, max_step_s=10.0)) | {
             "rows": recordings.rows}
     fit = identify_thermal(recs, model, parameters=params)
-    grids = [thermal_grid(r, params) for r in recs]
     return {"physics": "thermal", "recordings": list(fit.recordings), "rows": recordings.rows, **fit.summary(),
             "stderr": dict(fit.stderr), "confidence_95": {k: list(v) for k, v in fit.confidence.items()},
             "initial_offset_c": dict(fit.initial_offset_c), "n_samples": fit.n_samples,
             "success": fit.success, "status": fit.status, "message": fit.message,
-            "parameter_file": parameter_file(params, fit, fit.recordings, grids) if fit.success else None}
+            "parameter_file": parameter_file(params, fit, fit.recordings, envelope_of(recs)) if fit.success else None}
