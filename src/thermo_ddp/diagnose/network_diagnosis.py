@@ -15,7 +15,9 @@ from tqdm.auto import tqdm
 
 from .._figures import new_figure
 from ..model.network_spec import NetworkSpec
+from ..identify.network import FIXED_VALUES, values_of
 from ..identify.network_fit import NetworkFit
+from ..model.catalogue import SOURCE_KINDS
 from ..identify.thermal_data import ThermalGrid
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
@@ -183,7 +185,10 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
                 continue
             test = nested_test(subset_fit(fit), subset_fit(chosen, frozenset({"chosen"})))
             if not test.significant(settings.selection.alpha, len(tried), settings.selection.min_rmse_drop):
-                values = {p: v for p, v in fit.values.items() if p.startswith(f"thermal.source.{addition.term}.")}
+                values = {p: float(v) for p, v in values_of(fit.spec).items()
+                          if p.startswith(f"thermal.source.{addition.term}.")}
+                values |= {f"thermal.source.{step.addition.term}.{k}": 0.0 for k in SOURCE_KINDS[step.addition.term]
+                           if k not in FIXED_VALUES and k != "speed_exponent"}  # the chosen source's heat off
                 out.append({"terms": [addition.term], "instead_of": [step.addition.term], "where": addition.where,
                             "rmse": fit.rmse(), "values": values})
     best: dict[str, dict] = {}
