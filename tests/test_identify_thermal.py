@@ -216,9 +216,10 @@ def test_iron_losses_are_written_as_the_contract_iron_loss_the_planner_uses():
     from thermo_ddp.model.thermal import network_from_parameters
     model = ThermalModel(ELBOW, ("casing_node", "iron_losses"))
     values = {k: ELBOW.thermal[k] for k in model.keys if k != IRON_KEY} | {IRON_KEY: 0.03}
-    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name)
+    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name, confidence={IRON_KEY: (0.02, 0.04)})
     written = parameters_from_dict(parameter_file(ELBOW, fit, ("rec",)))
     assert written.thermal["iron_loss_w"] == 0.03 and written.thermal["iron_loss_speed_exponent"] == 2.0
+    assert written.scope.uncertainty == {"thermal.iron_loss_w": (0.02, 0.04)}  # by the written key's path
     iron = [s for s in network_from_parameters(written.thermal).sources if s.name == "speed_abs_rad_s"]
     assert len(iron) == 1 and iron[0].node == "winding"
     assert iron[0].power_w({"speed_abs_rad_s": 2.5}) == pytest.approx(0.03 * 2.5 ** 2, rel=1e-15)
