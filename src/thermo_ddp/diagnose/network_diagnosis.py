@@ -80,7 +80,7 @@ class NetworkDiagnosis(ThermalOutcome):
                 "p_value": test.p_value if test is not None else None,
                 "effect_k": float(np.sqrt(np.mean(np.concatenate([fit.simulated[g.name][0] - before.simulated[g.name][0]
                                                                   for g in self.grids]) ** 2))),
-                "ci95": {p: unc[p] for p in new}, "collinear_with": []}
+                "ci95": {p: unc[p] for p in new if p in unc}, "collinear_with": []}
 
     def not_determinable(self) -> list[dict]:
         out = []

@@ -23,6 +23,9 @@ from ..model.thermal import HeatSource, Link, ThermalNetwork, feature_key, heat_
 PREFIX = "thermal."
 IRON_EXPONENT_RANGE = (1.0, 2.5)  # catalogue's iron_loss_speed_exponent: hysteresis (1) to eddy and excess (2.5)
 SPEED_EXPONENTS = (1.0, 1.5, 2.0, 2.5)
+# Exactly on a lattice exponent the hat functions have no slope (|x|' = 0 at 0): a fit started there would
+# never move n.  Shifting n by 1e-9 changes the driver by a relative 1e-9 at most.
+KINK_SHIFT = 1e-9
 TINY = 1e-12  # keeps log(0) finite at rest: the interpolated driver is then ~1e-12, a heat of nothing
 FIXED_VALUES = ("ref_speed_rad_s", "motor_fraction")  # source values a fit never frees
 
@@ -61,6 +64,7 @@ def iron_feature(held: Mapping[str, object], exponent, ref_speed_rad_s):
     speed held constant over the interval (``exponent`` may be a CasADi symbol)."""
     log_mean = 0
     spacing = SPEED_EXPONENTS[1] - SPEED_EXPONENTS[0]
+    exponent = exponent + KINK_SHIFT
     for e in SPEED_EXPONENTS:
         weight = ca.fmax(0, 1 - ca.fabs(exponent - e) / spacing)
         log_mean = log_mean + weight * ca.log(held[feature_key("speed_abs_rad_s", e)] / ref_speed_rad_s ** e + TINY)

@@ -181,7 +181,7 @@ class NetworkFit:
         return max(self.rmse(s) / self.noise_c[s] for s in self.per_sensor())
 
     def uncertainty(self) -> dict[str, list[float]]:
-        """95 % interval of every fitted value (the file's ``[uncertainty]``)."""
+        """95 % interval of every fitted value with a finite one (the file's ``[uncertainty]``)."""
         out = {}
         for f in self.free:
             value, err = self.values[f.path], self.stderr.get(f.path, math.inf)
@@ -190,7 +190,9 @@ class NetworkFit:
                 lo, hi = value / factor, value * factor
             else:
                 lo, hi = value - Z95 * err, value + Z95 * err
-            out[f.path] = [max(lo, f.low), min(hi, f.high)]  # within the physical range searched
+            lo, hi = max(lo, f.low), min(hi, f.high)  # within the physical range searched
+            if math.isfinite(hi - lo):  # a value the data do not pin down has no finite interval
+                out[f.path] = [lo, hi]
         return out
 
     def relative_error(self, path: str) -> float:

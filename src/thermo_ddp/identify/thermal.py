@@ -571,8 +571,9 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
     (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
-    if fit.confidence:
-        data["uncertainty"] = {_path(k): [max(lo, 0.0), hi] for k, (lo, hi) in fit.confidence.items()}
+    finite = {_path(k): [max(lo, 0.0), hi] for k, (lo, hi) in fit.confidence.items() if math.isfinite(hi - lo)}
+    if finite:  # a value the data do not pin down has no finite interval: not written
+        data["uncertainty"] = finite
     if envelope:
         data["envelope"] = {k: list(v) for k, v in envelope.items()}
     values = dict(fit.parameters)
