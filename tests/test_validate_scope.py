@@ -130,6 +130,7 @@ def test_cli_validate_reports_scope_keys_and_says_when_outside(tmp_path, synthet
     assert {"per_sensor", "envelope", "alternatives", "band_k"} <= set(d)
     assert d["envelope"]["outside"] and d["envelope"]["quantities"]["current_a"]["here"] == [6.0, 18.0]
     assert set(d["per_sensor"]) == {"winding", "tooth", "yoke"} and d["band_k"] == 0.0
+    assert d["envelope"]["known"] and not validate_thermal([rec], _params()).to_dict()["envelope"]["known"]
     assert "used where it was never identified: current_a" in capsys.readouterr().out
 
 
@@ -152,3 +153,9 @@ def test_paderborn_profile_60_lies_outside_a_file_identified_on_profile_24(tmp_p
     assert q["ambient_c"]["above_by"] > 45.0 and q["current_a"]["above_by"] > 60.0
     assert "ambient_c" in d["message"] and "never identified" in d["message"]
     assert set(d["per_sensor"]) == {"winding"}  # a one-node file: tooth and yoke are no nodes of it
+
+
+def test_the_plot_draws_every_measured_node(tmp_path, synthetic):
+    result = validate_thermal([_recording(synthetic)], _params())
+    fig = result.plot(tmp_path / "v.png")
+    assert fig.stat().st_size > 10_000

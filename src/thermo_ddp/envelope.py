@@ -97,8 +97,10 @@ class EnvelopeCheck:
         return "used where it was never identified: " + "; ".join(outside)
 
     def to_dict(self) -> dict:
-        """The Validate JSON's ``envelope``: ``{"outside", "quantities": {name: {"identified", "here", ...}}}``."""
-        return {"outside": self.outside, "quantities": {q.name: q.to_dict() for q in self.quantities}}
+        """The Validate JSON's ``envelope``: ``{"outside", "quantities": {name: {"identified", "here", ...}},
+        "known"}`` (``known`` false: the file has no [envelope], so ``outside`` false says nothing)."""
+        return {"outside": self.outside, "quantities": {q.name: q.to_dict() for q in self.quantities},
+                "known": self.known}
 
 
 def check_envelope(identified: Mapping[str, tuple[float, float]], recordings: Sequence[Recording],

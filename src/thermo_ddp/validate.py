@@ -172,12 +172,17 @@ class Validation:
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 4) -> Path:
-        """Measured and predicted sensor temperature (top) and the error (bottom), per recording."""
+        """Measured and predicted sensor temperature, and every further measured node (top), and the
+        sensor's error (bottom), per recording."""
         shown = self.predictions[:max_recordings]
         fig, axes = new_figure(2, len(shown), figsize=(6 * len(shown), 6), sharex="col", squeeze=False)
         for c, p in enumerate(shown):
             axes[0, c].plot(p.time_s, p.measured_c, "k.", ms=1.5, label="recorded")
             axes[0, c].plot(p.time_s, p.predicted_c, lw=1.0, label=f"predicted ({Path(self.model).name})")
+            for node, (measured, predicted) in p.nodes.items():
+                if not np.array_equal(measured, p.measured_c):  # the further sensors, each in its colour
+                    line, = axes[0, c].plot(p.time_s, predicted, lw=0.8, label=f"{node} predicted")
+                    axes[0, c].plot(p.time_s, measured, ".", ms=1.0, color=line.get_color(), label=f"{node} recorded")
             axes[1, c].plot(p.time_s, p.error_c, lw=0.8, label=f"rmse {p.rmse:.3g} K, worst {p.max_abs_error:.3g} K")
             axes[0, c].set(title=p.recording, ylabel="sensor temperature [°C]")
             axes[1, c].set(xlabel="time [s]", ylabel="predicted - recorded [K]")
