@@ -306,3 +306,32 @@ def test_network_fit_uncertainty_by_dotted_path_is_written_and_read_back():
     speeds = np.abs(train.velocity)
     assert back.scope.envelope["speed_rad_s"] == (speeds.min(), speeds.max())
     assert speeds.max() <= 400.0 and back.scope.envelope["ambient_c"][0] == pytest.approx(25.0, abs=0.2)
+
+
+def test_identify_entry_fits_a_network_file_on_every_sensor(tmp_path):
+    """``thermo-ddp identify`` with a network file and a CSV with node_<name>_c columns: every sensor fitted at
+    once, a loadable network file with [uncertainty] and [envelope] written."""
+    import pandas as pd
+
+    from thermo_ddp.diagnose.network_diagnosis import network_section
+    from thermo_ddp.model.parameters import dumps_parameters, load_parameters, packaged_parameter_file
+
+    fit, truth, _, train = _network_truth_fit()
+    columns = {"time_s": train.time_s, "current_a": train.current_a, "temperature_c": train.temperature_c,
+               "velocity": train.velocity, "ambient_c": train.ambient_c}
+    columns |= {f"node_{n}_c": v for n, v in train.sensors.items()}
+    csv_path = tmp_path / "truth.csv"
+    pd.DataFrame(columns).to_csv(csv_path, index=False)
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    start = fit.spec.with_values({"node.winding.capacity_j_per_k": 2000.0, "source.iron_losses.power_w": 400.0})
+    network = parameters_from_dict(params.to_dict() | {"thermal": network_section(start, 25.0, "winding")}, "net")
+    model = tmp_path / "net.toml"
+    model.write_text(dumps_parameters(network))
+    out = identify_thermal_files([csv_path], parameters=model)
+    assert out["success"] and set(out["per_sensor"]) == {"winding", "tooth", "yoke"}
+    assert all(r < 1.3 * 0.05 for r in out["per_sensor"].values()), out["per_sensor"]
+    written = parameters_from_dict(out["parameter_file"], "written")
+    c = written.value("thermal.node.winding.capacity_j_per_k")
+    assert c == pytest.approx(truth.capacity_j_per_k[0], rel=0.04)
+    lo, hi = written.scope.uncertainty["thermal.node.winding.capacity_j_per_k"]
+    assert lo < c < hi and written.scope.envelope["current_a"][1] == pytest.approx(np.abs(train.current_a).max())

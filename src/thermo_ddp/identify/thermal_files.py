@@ -1,7 +1,8 @@
 """``thermo-ddp identify --physics thermal``: recordings -> the identified parameter file.
 
-A recording with one sensor (and a legacy file) is fitted by :func:`~thermo_ddp.identify.thermal.identify_thermal`;
-recordings with several sensors, or a general network file, by
+A legacy file whose network measures only the recording's ``temperature_c`` is fitted by
+:func:`~thermo_ddp.identify.thermal.identify_thermal` (and stays in its format); a general network file, or
+recordings with further sensors that are nodes of the file's network, by
 :func:`~thermo_ddp.identify.network_fit.fit_network` on the file's network, every sensor at once (a sensor the
 network has no node for is left out and named: ``diagnose`` adds such nodes).  The file written carries
 ``[uncertainty]`` (95 % interval of every fitted value) and ``[envelope]`` (what the recordings cover).
@@ -60,7 +61,8 @@ def identify_thermal_files(paths: Sequence[str | Path], model: str = "one_node",
     params = load_joint_parameters(parameters)
     recordings = read_recordings(paths, columns)
     recs = list(recordings.recordings)
-    if params.thermal.model == "network" or any(rec.sensors for rec in recs):
+    nodes = set(params.thermal.general.node_names)
+    if params.thermal.model == "network" or any(set(rec.sensors) & nodes for rec in recs):
         return identify_network_files(params, recs, ThermalSettings(min_step_s=10.0, max_step_s=10.0)) | {
             "rows": recordings.rows}
     fit = identify_thermal(recs, model, parameters=params)
