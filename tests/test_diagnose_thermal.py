@@ -299,3 +299,61 @@ def test_without_a_room_thermometer_a_steady_heat_is_the_rooms_stand_in_not_a_cl
     note = next(n for n in unlogged.to_dict()["not_determinable"] if n["term"] == "drive_heating")
     assert "ambient_c" in note["reason"] and "ambient_c" in note["experiment"]
     assert unlogged.final_fit.rmse <= 1.5 * logged.final_fit.rmse   # the stand-in keeps the fit
+
+
+# ----------------------------------------------------------------------------- a network that grows
+def _grower(family: str, seed: int = 2, kinds=("copper", "iron_losses", "friction_heating")):
+    from thermo_ddp.diagnose.growth import GrowthSettings, Grower
+    from thermo_ddp.diagnose.network_diagnosis import residual_noise
+    from thermo_ddp.diagnose.thermal import ThermalDiagnosisSettings
+    from thermo_ddp.identify.thermal import thermal_grid
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+    from thermo_ddp.testing.testbed.truths import network_case
+
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    train, _, truth = network_case(seed, family)
+    grids = [thermal_grid(train, params, ThermalDiagnosisSettings().fit)]
+    return Grower(params, grids, kinds, GrowthSettings(), residual_noise(grids, 120.0)), params, truth
+
+
+def test_sensor_nodes_the_file_lacks_are_added_and_explain_a_copper_only_truth():
+    """A one-node file and a recording with node_tooth_c and node_yoke_c: both nodes are added (not an error),
+    and on a copper-only three-node truth every sensor is then within 1.5 x its noise: nothing more to name."""
+    grower, params, truth = _grower("chain3")
+    spec, fit, steps = grower.place_sensors(params.thermal.general)
+    assert [s.addition.term for s in steps] == ["sensor_node", "sensor_node"]
+    assert set(spec.node_names) == {"winding", "tooth", "yoke"}
+    assert grower.explained(fit)
+    assert all(r < 1.5 * fit.noise_c[n] for n, r in fit.per_sensor().items()), fit.per_sensor()
+
+
+def test_growth_names_a_speed_dependent_iron_loss_by_the_nested_test():
+    """A three-node truth with iron losses P (|w| / w_ref)^n in tooth and yoke: after the sensors are placed,
+    the first accepted addition is an iron loss (p far below the Bonferroni level; a friction heat c1 |w| + c2 w^2
+    fits these speeds as well, and iron losses come first in the file's heat_sources), its exponent within the
+    physical 1-2.5 (its value is recovered once the structure is right: test_identify_thermal's network oracle)."""
+    grower, params, truth = _grower("chain3_iron")
+    spec, fit, _ = grower.place_sensors(params.thermal.general)
+    assert not grower.explained(fit)
+    step, tried = grower.step(fit)
+    assert step is not None and step.addition.term == "iron_losses"
+    assert step.test.p_value * len(tried) < 1e-6 and step.test.rmse_drop > 0.5
+    assert 1.0 <= step.fit.values["thermal.source.iron_losses.speed_exponent"] <= 2.5
+    assert {a.term for a, _ in tried} <= {"iron_losses", "friction_heating", "sink_node", "source_node"}
+
+
+@pytest.mark.slow
+def test_network_diagnosis_writes_a_file_that_says_what_it_learned_and_where():
+    """Slow (the fast tests above cover placement and naming): the whole diagnosis of a three-node iron truth
+    ends ok, names iron losses, writes a network file with [uncertainty], [envelope] that loads."""
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+    from thermo_ddp.testing.testbed.truths import network_case
+
+    train, _, truth = network_case(1, "chain3_iron")
+    d = diagnose_thermal([train], parameters=load_parameters(packaged_parameter_file("paderborn_pmsm")))
+    out = d.to_dict()
+    assert out["status"] == "ok" and "iron_losses" in d.missing_physics, d.report()
+    assert "drive_heating" not in d.missing_physics
+    back = parameters_from_dict(out["parameter_file"], "written")
+    assert back.thermal.model == "network" and len(back.thermal.general.nodes) >= 3
+    assert back.scope.uncertainty and back.scope.envelope["speed_rad_s"][1] <= 400.0

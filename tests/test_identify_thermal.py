@@ -9,7 +9,8 @@ import pytest
 from scipy.optimize import curve_fit
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.identify.thermal import (ThermalModel, ThermalSettings, identify_thermal, identify_thermal_files,
+from thermo_ddp.identify.thermal_files import identify_thermal_files
+from thermo_ddp.identify.thermal import (ThermalModel, ThermalSettings, identify_thermal,
                                          load_joint_parameters, thermal_grid)
 from thermo_ddp.model.parameters import parameters_from_dict
 from thermo_ddp.recordings import Recording
@@ -163,6 +164,11 @@ def test_csv_entry_point_returns_a_loadable_parameter_file(tmp_path):
     loaded = parameters_from_dict(out["parameter_file"])
     assert loaded.thermal.model == "one_node"
     assert loaded.thermal["capacity_j_per_k"] == out["parameters"]["capacity_j_per_k"]
+    # the file says how well each value is known and where it was identified
+    lo, hi = loaded.scope.uncertainty["thermal.capacity_j_per_k"]
+    assert lo < loaded.thermal["capacity_j_per_k"] < hi
+    assert set(loaded.scope.uncertainty) == {"thermal.capacity_j_per_k", "thermal.resistance_k_per_w"}
+    assert loaded.scope.envelope["current_a"][1] == pytest.approx(np.abs(rec.to_recording().current_a).max())
     bad = tmp_path / "no_temp.csv"
     rec.to_csv(bad, columns=("time_s", "current_a"))
     with pytest.raises(InputError, match="temperature_c"):
@@ -210,9 +216,10 @@ def test_iron_losses_are_written_as_the_contract_iron_loss_the_planner_uses():
     from thermo_ddp.model.thermal import network_from_parameters
     model = ThermalModel(ELBOW, ("casing_node", "iron_losses"))
     values = {k: ELBOW.thermal[k] for k in model.keys if k != IRON_KEY} | {IRON_KEY: 0.03}
-    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name)
+    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name, confidence={IRON_KEY: (0.02, 0.04)})
     written = parameters_from_dict(parameter_file(ELBOW, fit, ("rec",)))
     assert written.thermal["iron_loss_w"] == 0.03 and written.thermal["iron_loss_speed_exponent"] == 2.0
+    assert written.scope.uncertainty == {"thermal.iron_loss_w": (0.02, 0.04)}  # by the written key's path
     iron = [s for s in network_from_parameters(written.thermal).sources if s.name == "speed_abs_rad_s"]
     assert len(iron) == 1 and iron[0].node == "winding"
     assert iron[0].power_w({"speed_abs_rad_s": 2.5}) == pytest.approx(0.03 * 2.5 ** 2, rel=1e-15)
@@ -230,3 +237,101 @@ def test_speed_regressor_says_where_it_comes_from_and_gaps_split_the_recording()
     parts, skipped = split_at_gaps(Recording(name="g", position=q, **base))
     assert [p.name for p in parts] == ["g[0]", "g[1]"] and skipped == 5   # a 300 s gap; a 5-sample tail left out
     assert parts[1].time_s[0] == 900.0 and np.array_equal(parts[1].position, q[600:1200])
+
+
+# ----------------------------------------------------------------------------- general networks, several sensors
+def _network_truth_fit(seed: int = 1):
+    from thermo_ddp.identify.network import free_paths
+    from thermo_ddp.identify.network_fit import fit_network
+    from thermo_ddp.diagnose.growth import Ranges
+    from thermo_ddp.model.network_spec import LinkSpec, NetworkSpec, NodeSpec, SourceSpec
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+    from thermo_ddp.testing.testbed.truths import network_case
+
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    train, _, truth = network_case(seed, "chain3_iron")
+    grid = thermal_grid(train, params, ThermalSettings(min_step_s=10.0, max_step_s=10.0))
+    c = truth.capacity_j_per_k
+    # the truth's structure, every value started 20-40 % off and the iron loss's share and exponent free
+    spec = NetworkSpec(
+        (NodeSpec("winding", 1.4 * c[0]), NodeSpec("tooth", 0.7 * c[1]), NodeSpec("yoke", 1.3 * c[2])),
+        (LinkSpec(("winding", "tooth"), 1.3 * truth.winding_tooth_k_per_w),
+         LinkSpec(("tooth", "yoke"), 0.8 * truth.tooth_yoke_k_per_w),
+         LinkSpec(("yoke", "ambient"), 1.2 * truth.yoke_coolant_k_per_w)),
+        (SourceSpec("copper", {"winding": 1.0}, {}),
+         SourceSpec("iron_losses", {"tooth": 0.5, "yoke": 0.5},
+                    {"power_w": 300.0, "speed_exponent": 2.0, "ref_speed_rad_s": truth.ref_speed_rad_s})))
+    ranges = Ranges((1.0, 1e6), 1e4, params.motor.current_nominal_a)
+    fit = fit_network(params, spec, "winding", tuple(ranges.free(p) for p in free_paths(spec)), [grid])
+    return fit, truth, grid, train
+
+
+def test_network_fit_recovers_a_three_node_truth_on_every_sensor():
+    """Oracle: a numpy three-node truth integrated exactly on a 1 s step (testing.testbed.truths), three sensors
+    with 0.05 K noise; the fit's 10 s trapezoidal grid recovers it within its discretisation (2 %)."""
+    fit, truth, grid, _ = _network_truth_fit()
+    assert fit.success, fit.message
+    c = truth.capacity_j_per_k
+    expected = {"thermal.node.winding.capacity_j_per_k": c[0], "thermal.node.tooth.capacity_j_per_k": c[1],
+                "thermal.node.yoke.capacity_j_per_k": c[2],
+                "thermal.link.winding-tooth.resistance_k_per_w": truth.winding_tooth_k_per_w,
+                "thermal.link.tooth-yoke.resistance_k_per_w": truth.tooth_yoke_k_per_w,
+                "thermal.link.yoke-ambient.resistance_k_per_w": truth.yoke_coolant_k_per_w,
+                "thermal.source.iron_losses.power_w": truth.iron_w,
+                "thermal.source.iron_losses.split.yoke": truth.iron_split[1]}
+    for path, value in expected.items():
+        assert fit.values[path] == pytest.approx(value, rel=0.04), path
+    assert fit.values["thermal.source.iron_losses.speed_exponent"] == pytest.approx(truth.iron_exponent, abs=0.03)
+    # each sensor weighted by its own noise, estimated from second differences of its readings
+    assert set(fit.noise_c) == {"winding", "tooth", "yoke"}
+    assert all(0.04 < s < 0.065 for s in fit.noise_c.values()), fit.noise_c
+    assert all(r < 1.3 * 0.05 for r in fit.per_sensor().values()), fit.per_sensor()
+
+
+def test_network_fit_uncertainty_by_dotted_path_is_written_and_read_back():
+    """[uncertainty] (95 % interval of every fitted value) and [envelope] written into a network file that
+    the parameter reader accepts: every interval holds its value."""
+    from thermo_ddp.diagnose.network_diagnosis import network_section
+    from thermo_ddp.envelope import envelope_of
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+
+    fit, truth, grid, train = _network_truth_fit()
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    data = params.to_dict() | {"thermal": network_section(fit.spec, 25.0, "winding"), "uncertainty": fit.uncertainty(),
+                               "envelope": {k: list(v) for k, v in envelope_of([train]).items()}}
+    back = parameters_from_dict(data, "written")
+    assert set(back.scope.uncertainty) == set(fit.values)
+    for path, (lo, hi) in back.scope.uncertainty.items():
+        assert lo <= back.value(path) <= hi and hi > lo, path
+    speeds = np.abs(train.velocity)
+    assert back.scope.envelope["speed_rad_s"] == (speeds.min(), speeds.max())
+    assert speeds.max() <= 400.0 and back.scope.envelope["ambient_c"][0] == pytest.approx(25.0, abs=0.2)
+
+
+def test_identify_entry_fits_a_network_file_on_every_sensor(tmp_path):
+    """``thermo-ddp identify`` with a network file and a CSV with node_<name>_c columns: every sensor fitted at
+    once, a loadable network file with [uncertainty] and [envelope] written."""
+    import pandas as pd
+
+    from thermo_ddp.diagnose.network_diagnosis import network_section
+    from thermo_ddp.model.parameters import dumps_parameters, load_parameters, packaged_parameter_file
+
+    fit, truth, _, train = _network_truth_fit()
+    columns = {"time_s": train.time_s, "current_a": train.current_a, "temperature_c": train.temperature_c,
+               "velocity": train.velocity, "ambient_c": train.ambient_c}
+    columns |= {f"node_{n}_c": v for n, v in train.sensors.items()}
+    csv_path = tmp_path / "truth.csv"
+    pd.DataFrame(columns).to_csv(csv_path, index=False)
+    params = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    start = fit.spec.with_values({"node.winding.capacity_j_per_k": 2000.0, "source.iron_losses.power_w": 400.0})
+    network = parameters_from_dict(params.to_dict() | {"thermal": network_section(start, 25.0, "winding")}, "net")
+    model = tmp_path / "net.toml"
+    model.write_text(dumps_parameters(network))
+    out = identify_thermal_files([csv_path], parameters=model)
+    assert out["success"] and set(out["per_sensor"]) == {"winding", "tooth", "yoke"}
+    assert all(r < 1.3 * 0.05 for r in out["per_sensor"].values()), out["per_sensor"]
+    written = parameters_from_dict(out["parameter_file"], "written")
+    c = written.value("thermal.node.winding.capacity_j_per_k")
+    assert c == pytest.approx(truth.capacity_j_per_k[0], rel=0.04)
+    lo, hi = written.scope.uncertainty["thermal.node.winding.capacity_j_per_k"]
+    assert lo < c < hi and written.scope.envelope["current_a"][1] == pytest.approx(np.abs(train.current_a).max())

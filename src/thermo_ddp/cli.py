@@ -106,7 +106,7 @@ def _identify(args, out: Outputs) -> Run:
         from .identify.mechanical import identify_mechanical_files
         result = identify_mechanical_files(args.recordings, columns=args.columns)
     else:
-        from .identify.thermal import identify_thermal_files
+        from .identify.thermal_files import identify_thermal_files
         result = identify_thermal_files(args.recordings, parameters=args.model, columns=args.columns)
     _stage_model(out, result)
     return Run(identification_report(result), result)

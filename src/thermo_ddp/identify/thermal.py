@@ -60,7 +60,7 @@ from scipy import optimize
 from .._config import require
 from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
                                 packaged_parameter_file, parameters_from_dict, unit)
-from ..recordings import as_recordings, read_recordings
+from ..recordings import as_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, correlation, covariance, integrated_autocorrelation
 from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
@@ -564,10 +564,18 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
     return fit_grids(structure, grids, start=start, settings=settings)
 
 
-def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = ()) -> dict:
+def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = (),
+                   envelope: Mapping[str, Sequence[float]] | None = None) -> dict:
     """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
-    ``iron_losses`` k v^2 is written as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2)."""
-    data = params.to_dict()
+    ``iron_losses`` k v^2 is written as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2);
+    [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
+    (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
+    data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
+    finite = {_path(k): [max(lo, 0.0), hi] for k, (lo, hi) in fit.confidence.items() if math.isfinite(hi - lo)}
+    if finite:  # a value the data do not pin down has no finite interval: not written
+        data["uncertainty"] = finite
+    if envelope:
+        data["envelope"] = {k: list(v) for k, v in envelope.items()}
     values = dict(fit.parameters)
     model = network_model(fit.terms)
     data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()
@@ -584,15 +592,6 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     return parameters_from_dict(data, f"identified from {where}").to_dict()
 
 
-def identify_thermal_files(paths: Sequence[str | Path], model: str = "one_node", *,
-                           parameters: JointParameters | str | Path | None = None, columns=None) -> dict:
-    """CLI entry (``thermo-ddp identify --physics thermal``): CSV paths (any columns through the
-    column map ``columns``) -> a JSON-ready dict with ``rows`` and the identified ``parameter_file``."""
-    params = load_joint_parameters(parameters)
-    recordings = read_recordings(paths, columns)
-    fit = identify_thermal(list(recordings.recordings), model, parameters=params)
-    return {"physics": "thermal", "recordings": list(fit.recordings), "rows": recordings.rows, **fit.summary(),
-            "stderr": dict(fit.stderr), "confidence_95": {k: list(v) for k, v in fit.confidence.items()},
-            "initial_offset_c": dict(fit.initial_offset_c), "n_samples": fit.n_samples,
-            "success": fit.success, "status": fit.status, "message": fit.message,
-            "parameter_file": parameter_file(params, fit, fit.recordings) if fit.success else None}
+def _path(key: str) -> str:
+    """The dotted path of a fitted key in the file it is written to."""
+    return {"copper_alpha_per_k": "motor.copper_alpha_per_k", IRON_KEY: "thermal.iron_loss_w"}.get(key, f"thermal.{key}")

@@ -4,6 +4,7 @@ and the winding's resistance thermometry from the motor voltage, with the settin
 from __future__ import annotations
 
 import dataclasses
+from typing import Mapping
 
 import casadi as ca
 import numpy as np
@@ -15,10 +16,12 @@ from ..model.parameters import JointParameters
 from ..model.thermal import feature_key, feature_value
 from ..recordings import Recording
 
-# Loss drivers held over each (sub-)step, (name in motor.losses_w, exponent): rows 1-3 and 5 of
-# ThermalGrid.inputs; row 0 is the step length, row 4 the ambient.
-DRIVERS = (("current_sq_a2", 1.0), ("friction_w", 1.0), ("speed_abs_rad_s", 2.0), ("speed_abs_rad_s", 1.0))
-INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", feature_key(*DRIVERS[3]))
+# Loss drivers held over each (sub-)step, (name in motor.losses_w, exponent): rows 1-3 and 5- of
+# ThermalGrid.inputs; row 0 is the step length, row 4 the ambient.  The speed's powers 1.5 and 2.5 serve
+# the iron loss of a fitted exponent (identify.network.SPEED_EXPONENTS).
+DRIVERS = (("current_sq_a2", 1.0), ("friction_w", 1.0), ("speed_abs_rad_s", 2.0), ("speed_abs_rad_s", 1.0),
+           ("speed_abs_rad_s", 1.5), ("speed_abs_rad_s", 2.5))
+INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", *(feature_key(*d) for d in DRIVERS[3:]))
 
 @checked_settings("thermal settings", min_step_s="[0, inf)", max_step_s="(0, inf)", head_s="[0, inf)",
                   gap_factor="(1, inf)", gap_window_s="(0, inf)", max_nfev="[1, inf)", chi2_tolerance="(0, 1]",
@@ -76,6 +79,8 @@ class ThermalGrid:
     winding_c: np.ndarray | None = None       # resistance thermometry at the kept samples (NaN: unusable)
     winding_weight: np.ndarray | None = None  # sensor_noise_c / its standard deviation (0: unusable)
     speed_source: str = "none"  # "velocity" (recorded), "position differences" or "none"
+    sensors: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)  # node -> measured at kept samples
+    ambient_c: np.ndarray | None = None  # at the kept samples (the file's ambient_c when not recorded)
 
     @property
     def thermometry_samples(self) -> int:
@@ -95,8 +100,11 @@ def _velocity(rec: Recording) -> tuple[np.ndarray | None, str]:
     return None, "none"
 
 
-def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSettings | None = None) -> ThermalGrid:
-    """Validate ``rec`` (needs ``current_a`` and ``temperature_c``) and build its integration grid."""
+def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSettings | None = None,
+                 sensor: str | None = None) -> ThermalGrid:
+    """Validate ``rec`` (needs ``current_a`` and ``temperature_c``) and build its integration grid.
+    ``sensors`` holds ``temperature_c`` under ``sensor`` (default: the file's sensor node) and every
+    further measured node (:attr:`Recording.sensors`, ``node_<name>_c``)."""
     settings = settings or ThermalSettings()
     rec.require("current_a", "temperature_c")
     src = rec.source or rec.name
@@ -117,9 +125,12 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     substeps = np.maximum(np.ceil(span / settings.max_step_s - 1e-9).astype(int), 1)
     inputs = np.vstack([np.repeat(span / substeps, substeps), np.repeat(held, substeps, axis=1)])
     thermometry = _thermometry(rec, params, settings, v, keep) if settings.voltage_thermometry else (None, None)
+    measured = {sensor or params.thermal.sensor_node: np.asarray(rec.temperature_c, float)[keep]}
+    measured |= {node: np.asarray(values, float)[keep] for node, values in rec.sensors.items()}
     return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
                        inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry,
-                       speed_source=speed_source)
+                       speed_source=speed_source, sensors=measured, ambient_c=ambient[keep])
+
 
 
 def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,

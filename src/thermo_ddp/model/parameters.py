@@ -186,8 +186,12 @@ class JointParameters:
         return dataclasses.replace(self.with_values(alt.values), scope=dataclasses.replace(self.scope, alternatives=()))
 
     def replace(self, section: str, **values: float) -> "JointParameters":
-        """A copy with some values of ``motor``, ``thermal`` or ``limits`` replaced (validated)."""
+        """A copy with some values of ``motor``, ``thermal`` or ``limits`` replaced (validated); a replaced
+        value's [uncertainty] interval described the value it replaces and is dropped."""
         data = self.to_dict()
+        if "uncertainty" in data:
+            data["uncertainty"] = {k: v for k, v in data["uncertainty"].items()
+                                   if k not in {f"{section}.{key}" for key in values}}
         known = set(data[section]) | (set(THERMAL_OPTIONAL) | set(THERMAL_NODE_CHOICES) if section == "thermal" else set())
         unknown = sorted(set(values) - known)
         if unknown:
