@@ -85,7 +85,7 @@ def test_one_node_network_is_the_hand_written_equation():
     th = LEGACY["one_node"]
     params = _params(th)
     temp, i, v, amb = 61.0, 4.0, -3.0, 22.0
-    heat = (motor.joule_w(params.motor, i, temp) + 3.0 * (abs(v) / 2.0) ** 1.5
+    heat = (motor.joule_w(params.motor, i, temp) + 3.0 * (float(motor.smooth_abs(params.motor, v)) / 2.0) ** 1.5
             + 0.7 * float(motor.friction_w(params.motor, v)) + 4.0)
     expected = (heat - (temp - amb) / 2.0) / 300.0
     assert _rhs(params, [temp], i, v, amb)[0] == pytest.approx(expected, rel=1e-12)
@@ -95,7 +95,7 @@ def test_two_node_drive_network_is_the_hand_written_equations():
     params = _params(LEGACY["two_node_drive"])
     w, c, d, i, v, amb = 70.0, 45.0, 50.0, 2.5, 0.8, 26.0
     joule = float(motor.joule_w(params.motor, i, w))
-    friction = abs(v) * 0.4
+    friction = float(motor.smooth_abs(params.motor, v)) * 0.4  # the model's |v| (smooth at rest)
     casing_heat = float(motor.friction_w(params.motor, v))  # fraction 1.0 into the casing
     drive = 23.0 + 0.1 * i ** 2
     expected = [(joule + friction - (w - c) / 0.9) / 40.0,

@@ -62,10 +62,11 @@ class HeatSource:
 
 
 def _power(x, exponent):
-    """``x ** exponent`` of a non-negative driver; with a symbolic exponent 0 where x = 0, so that its
-    derivative in the exponent (x^n log x) is 0 there, not NaN (a motor at rest)."""
+    """``x ** exponent`` of a non-negative driver: :func:`motor.driver_power` (finite derivatives at rest);
+    with a symbolic exponent 0 where x = 0, so that its derivative in the exponent (x^n log x) is 0 there,
+    not NaN (a motor at rest)."""
     if isinstance(exponent, (int, float)):
-        return x ** exponent
+        return motor.driver_power(x, exponent)
     return ca.if_else(x > 0, x ** exponent, 0)
 
 
@@ -77,7 +78,7 @@ def feature_key(name: str, exponent: float = 1.0) -> str:
 def feature_value(powers: Mapping[str, object], name: str, exponent: float = 1.0):
     """``powers[name] ** exponent``, or its held mean when ``powers`` has it under :func:`feature_key`."""
     key = feature_key(name, exponent)
-    return powers[key] if key in powers else motor.driver_power(powers[name], exponent)
+    return powers[key] if key in powers else _power(powers[name], exponent)
 
 
 @dataclass(frozen=True)
