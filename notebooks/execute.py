@@ -28,9 +28,6 @@ PROGRESS_BAR = re.compile(r"\d+%\|.*\||\d+(\.\d+)?(it/s|s/it)\]|\r(?!\n)")
 STRAY_VALUE = re.compile(r"^(-?\d+|None|.*\bat 0x[0-9a-f]+>.*)$", re.S)
 TEXT_TYPES = ("text/plain", "text/html", "text/markdown", "application/json")
 WIDGET = "application/vnd.jupyter.widget-view+json"
-# Jupyter's tqdm asks for ipywidgets when a library imports tqdm.auto in a kernel without them: a hint to
-# install a package, not a problem of the notebook. Filtered in the kernel only; every other warning stays.
-KERNEL_SETUP = ["import warnings", "warnings.filterwarnings('ignore', message='IProgress not found')"]
 
 
 def _texts(output: dict) -> list[str]:
@@ -81,9 +78,8 @@ def execute(path: Path, out_dir: Path) -> None:
     os.environ["THERMO_DDP_NOTEBOOK_OUT"] = str(out_dir / path.stem)
     os.environ["TQDM_DISABLE"] = "1"
     nb = nbformat.read(path, as_version=4)
-    setup = "--InteractiveShellApp.exec_lines=" + json.dumps(KERNEL_SETUP)
     NotebookClient(nb, timeout=None, kernel_name="python3", record_timing=False,
-                   extra_arguments=[setup, "--IPKernelApp.log_level=ERROR"],
+                   extra_arguments=["--IPKernelApp.log_level=ERROR"],
                    resources={"metadata": {"path": str(path.parent)}}).execute()
     nbformat.validate(nb)
     nbformat.write(nb, path)

@@ -14,7 +14,7 @@ from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from .errors import InputError
 from .model.integrators import rk4

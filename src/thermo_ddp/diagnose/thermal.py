@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from .._config import require
 from ..envelope import envelope_of

@@ -22,7 +22,7 @@ from typing import Mapping
 
 import casadi as ca
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from ..model import motor
 from ..model.actuated import ActuatedArm
