@@ -255,9 +255,9 @@ def _network_truth_fit(seed: int = 1):
     # the truth's structure, every value started 20-40 % off and the iron loss's share and exponent free
     spec = NetworkSpec(
         (NodeSpec("winding", 1.4 * c[0]), NodeSpec("tooth", 0.7 * c[1]), NodeSpec("yoke", 1.3 * c[2])),
-        (LinkSpec(("winding", "tooth"), 1.3 * truth.winding_tooth_k_per_w),
-         LinkSpec(("tooth", "yoke"), 0.8 * truth.tooth_yoke_k_per_w),
-         LinkSpec(("yoke", "ambient"), 1.2 * truth.yoke_coolant_k_per_w)),
+        (LinkSpec(("winding", "tooth"), 1.3 * truth.link_k_per_w["winding-tooth"]),
+         LinkSpec(("tooth", "yoke"), 0.8 * truth.link_k_per_w["tooth-yoke"]),
+         LinkSpec(("yoke", "ambient"), 1.2 * truth.link_k_per_w["yoke-ambient"])),
         (SourceSpec("copper", {"winding": 1.0}, {}),
          SourceSpec("iron_losses", {"tooth": 0.5, "yoke": 0.5},
                     {"power_w": 300.0, "speed_exponent": 2.0, "ref_speed_rad_s": truth.ref_speed_rad_s})))
@@ -274,9 +274,9 @@ def test_network_fit_recovers_a_three_node_truth_on_every_sensor():
     c = truth.capacity_j_per_k
     expected = {"thermal.node.winding.capacity_j_per_k": c[0], "thermal.node.tooth.capacity_j_per_k": c[1],
                 "thermal.node.yoke.capacity_j_per_k": c[2],
-                "thermal.link.winding-tooth.resistance_k_per_w": truth.winding_tooth_k_per_w,
-                "thermal.link.tooth-yoke.resistance_k_per_w": truth.tooth_yoke_k_per_w,
-                "thermal.link.yoke-ambient.resistance_k_per_w": truth.yoke_coolant_k_per_w,
+                "thermal.link.winding-tooth.resistance_k_per_w": truth.link_k_per_w["winding-tooth"],
+                "thermal.link.tooth-yoke.resistance_k_per_w": truth.link_k_per_w["tooth-yoke"],
+                "thermal.link.yoke-ambient.resistance_k_per_w": truth.link_k_per_w["yoke-ambient"],
                 "thermal.source.iron_losses.power_w": truth.iron_w,
                 "thermal.source.iron_losses.split.yoke": truth.iron_split[1]}
     for path, value in expected.items():

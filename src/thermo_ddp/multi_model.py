@@ -74,13 +74,13 @@ class MultiModelProblem:
     shared: int = 0
     costs: Sequence[Cost] = ()
     terminal_costs: Sequence[Cost] = ()
-    constraints: Sequence[Constraint] = ()
-    terminal_constraints: Sequence[Constraint] = ()
     cross_costs: Sequence[Cost] = ()
     terminal_cross_costs: Sequence[Cost] = ()
+    cost_on: str = "nominal"                      # the scenarios' own costs: on the nominal one, or the mean
+    constraints: Sequence[Constraint] = ()
+    terminal_constraints: Sequence[Constraint] = ()
     u_lb: Sequence[float] | np.ndarray | None = None
     u_ub: Sequence[float] | np.ndarray | None = None
-    cost_on: str = "nominal"
     parameters: KnotParameters | None = None
     name: str = "multi_model"
 

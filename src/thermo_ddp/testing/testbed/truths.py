@@ -15,7 +15,7 @@ Which terms a truth *conceals* from the one-node baseline (contract term names):
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.linalg import expm
@@ -151,6 +151,9 @@ def random_case(seed: int, concealed: Sequence[str] | None = None) -> tuple[Reco
 
 # ----------------------------------------------------------------------------- multi-sensor network truths
 NETWORK_FAMILIES = ("chain3", "chain3_iron", "rotor4_iron")
+_LINKS_K_PER_W = {"winding-tooth": 0.03, "tooth-yoke": 0.02, "yoke-ambient": 0.015, "rotor-tooth": 0.08,
+                  "rotor-ambient": 0.3}
+_FIXED_LINKS = ("rotor-ambient",)  # kept by randomised()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,18 +167,15 @@ class NetworkTruth:
 
     family: str = "chain3_iron"
     capacity_j_per_k: tuple[float, float, float, float] = (1500.0, 2000.0, 5000.0, 3000.0)  # winding, tooth, yoke, rotor
-    winding_tooth_k_per_w: float = 0.03
-    tooth_yoke_k_per_w: float = 0.02
-    yoke_coolant_k_per_w: float = 0.015
-    rotor_tooth_k_per_w: float = 0.08
-    rotor_coolant_k_per_w: float = 0.3
+    # thermal resistances by link, named as a network file names them ("ambient": the coolant)
+    link_k_per_w: Mapping[str, float] = dataclasses.field(default_factory=lambda: dict(_LINKS_K_PER_W))
     resistance_ohm: float = 0.0237
     resistance_ref_c: float = 70.0
     copper_alpha_per_k: float = 0.00393
+    iron_split: tuple[float, float, float] = (0.6, 0.4, 0.0)  # tooth, yoke, rotor
     iron_w: float = 600.0            # at ref_speed_rad_s
     ref_speed_rad_s: float = 600.0
     iron_exponent: float = 1.6
-    iron_split: tuple[float, float, float] = (0.6, 0.4, 0.0)  # tooth, yoke, rotor
 
     @property
     def nodes(self) -> tuple[str, ...]:
@@ -192,20 +192,23 @@ class NetworkTruth:
         split = (0.3, 0.3, 0.4) if self.family == "rotor4_iron" else self.iron_split
         return dataclasses.replace(
             self, capacity_j_per_k=tuple(c * f() for c in self.capacity_j_per_k),
-            winding_tooth_k_per_w=self.winding_tooth_k_per_w * f(), tooth_yoke_k_per_w=self.tooth_yoke_k_per_w * f(),
-            yoke_coolant_k_per_w=self.yoke_coolant_k_per_w * f(), rotor_tooth_k_per_w=self.rotor_tooth_k_per_w * f(),
+            link_k_per_w={k: r if k in _FIXED_LINKS else r * f() for k, r in self.link_k_per_w.items()},
             iron_w=self.iron_w * f(), iron_exponent=rng.uniform(1.2, 2.2), iron_split=split)
 
     def system(self, current_a: float, speed_rad_s: float, coolant_c: float) -> tuple[np.ndarray, np.ndarray]:
         """dT/dt = A T + b for held inputs."""
         n = len(self.nodes)
         g = np.zeros((n, n))
-        pairs = [(0, 1, self.winding_tooth_k_per_w), (1, 2, self.tooth_yoke_k_per_w)]
-        if n == 4:
-            pairs.append((3, 1, self.rotor_tooth_k_per_w))
-        for i, j, r in pairs:
-            g[i, j] = g[j, i] = 1 / r
-        sink = np.array([0.0, 0.0, 1 / self.yoke_coolant_k_per_w, 1 / self.rotor_coolant_k_per_w][:n])
+        sink = np.zeros(n)
+        for link, r in self.link_k_per_w.items():
+            a, b = link.split("-")
+            if a not in self.nodes or (b != "ambient" and b not in self.nodes):
+                continue
+            i = self.nodes.index(a)
+            if b == "ambient":
+                sink[i] = 1 / r
+            else:
+                g[i, self.nodes.index(b)] = g[self.nodes.index(b), i] = 1 / r
         i2 = current_a ** 2
         heat = np.zeros(n)
         heat[0] = self.resistance_ohm * (1 - self.copper_alpha_per_k * self.resistance_ref_c) * i2
