@@ -5,17 +5,17 @@ statistical test, name what the data cannot tell apart, and say so when nothing 
 Candidates (contract term names) are free, physically bounded parts of the one thermal network
 (:func:`thermo_ddp.model.thermal.network_from_parameters`, through :mod:`thermo_ddp.identify.thermal`):
 
-==================  =========================================================  ==========================
+==================  ==========================================================  =========================================
 term                physics                                                     parameter file
-==================  =========================================================  ==========================
-friction_heating    heat c1 |v| + c2 v^2 (free, >= 0; winding of a one-node     ``friction_heat_linear_w_s_per_rad``,
+==================  ==========================================================  =========================================
+friction_heating    heat c1 abs(v) + c2 v^2 (free, >= 0; winding of a one-node  ``friction_heat_linear_w_s_per_rad``,
                     network, casing otherwise), not tied to [motor] friction    ``friction_heat_quadratic_w_s2_per_rad2``
 drive_heating       idle W + W/A^2 i^2 on the sensor node (one node), or a      ``drive_idle_w``, ``drive_loss_w_per_a2``
                     drive node heating the casing (with the casing node)        (+ ``model = "two_node_drive"``)
 casing_node         winding and casing nodes, sensor on the casing (eq. 6)      ``model = "two_node"``
 copper_resistance   free temperature coefficient of R(T) (eq. 3)                ``[motor] copper_alpha_per_k``
-iron_losses         speed-dependent loss P_ref (|v| / 1 rad/s)^2 in the winding ``iron_loss_w`` (+ ref speed, exponent)
-==================  =========================================================  ==========================
+iron_losses         speed-dependent loss P_ref (abs(v) / 1 rad/s)^2, winding    ``iron_loss_w`` (+ ref speed, exponent)
+==================  ==========================================================  =========================================
 
 Selection (:func:`thermo_ddp.diagnose.selection.subset_select`): every subset of the usable
 candidates is fitted (output error, multi-start: the best nested fit and the parameter file);
