@@ -21,6 +21,7 @@ from typing import Any
 
 import casadi as ca
 import numpy as np
+from tqdm import tqdm
 
 from .._config import require
 from .._memo import Memo
@@ -248,6 +249,7 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
     knots = -1 if nominal.status == "infeasible" else int(round(nominal.achieved_hold_s / settings.dt_s))
     rnd = _Round(lp.with_hold(nominal.achieved_hold_s), _as_result(nominal), knots, [], nominal.status == "failed")
     thetas, failure, worst_s = [uset.nominal], "", 0.0
+    bar = tqdm(desc="robust plan: worst motors added", unit="scenario", leave=False, disable=None)  # terminal only
     while True:
         tic = time.perf_counter()
         motor = worst.search(rnd.qv, rnd.result.us, _nominal_params(rnd.lp), model.ambient_c)
@@ -260,8 +262,10 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
             break
         thetas.append(motor.theta)
         rnd = _robust_round(lp, uset, thetas, worst, rnd, motor)
+        bar.update(1)
         log.info("%d scenarios: robust hold %.1f s (worst motor %.1f °C before)", len(thetas),
                  max(rnd.knots, 0) * settings.dt_s, motor.peak_c)
+    bar.close()
     return _plan(nominal, rnd, spec, uset, np.array(thetas), motor, worst, worst_s, failure)
 
 
