@@ -69,6 +69,9 @@ def test_uncertainty_sets_and_bad_input(tmp_path):
     fs = UncertaintySet.from_file(load_parameters(good), good)
     assert fs.keys == ("thermal.casing_ambient_k_per_w", "motor.resistance_ohm")
     np.testing.assert_allclose(fs.low, [1.2, 0.6])
+    wide = UncertaintySet.from_fraction(load_parameters(good), 0.2)  # wider than the file's own intervals:
+    corner = wide.parameters(load_parameters(good), wide.high)       # a motor of the set, not refused by them
+    assert corner.motor.resistance_ohm == pytest.approx(1.2 * 0.7) and not corner.scope.uncertainty
     outside = tmp_path / "outside.toml"
     outside.write_text(text + '\n[uncertainty]\n"motor.resistance_ohm" = [0.8, 0.9]\n')
     with pytest.raises(InputError, match="outside the interval"):  # refused when the file is read

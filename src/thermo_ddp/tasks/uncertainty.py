@@ -96,7 +96,8 @@ class UncertaintySet:
     def parameters(self, params: JointParameters, theta) -> JointParameters:
         """The parameter file with the values ``theta`` (validated like a file)."""
         values = dict(zip(self.keys, np.asarray(theta, float).tolist()))
-        return params.with_values(values).checked()
+        motor = params.with_values(values)  # one motor of the set: the file's own intervals no longer apply
+        return dataclasses.replace(motor, scope=dataclasses.replace(motor.scope, uncertainty={})).checked()
 
     def to_dict(self) -> dict:
         return {"set": self.label, "keys": list(self.keys), "low": self.low.tolist(), "high": self.high.tolist()}
