@@ -1,8 +1,8 @@
 """The code blocks of the README and the documentation pages, and how the tests run them.
 
 The convention, visible to a reader in the block itself (docs/contributing.md):
-- a ``python`` block is executed; an ``sh`` block's ``thermo-ddp``, ``python`` and ``make plan`` lines are run
-  as processes; blocks in any other language (toml, json, text) are shown, not run;
+- a ``python`` block is executed; an ``sh`` block's ``thermo-ddp``, ``python`` and ``make plan`` lines are
+  run as processes (``make test`` is the suite itself: listed as skipped); blocks in any other language (toml, json, text) are shown, not run;
 - ``# not tested: <why>`` on a block's first line skips the block, at the end of a line that line;
 - ``# needs ../shared/data/<file>`` runs the block or line only when that file is beside the project;
 - ``# exits N: <why>`` expects exit status N (1: a run that failed; 2: bad input, one line on stderr), on the
@@ -140,13 +140,15 @@ def commands(block: Block) -> tuple[list[Command], list[str]]:
             skipped.append(f"{' '.join(argv[:2])} ...: needs {m['path']} beside the project")
             continue
         code = int(m["code"]) if (m := EXITS.search(note)) else default
-        if argv[:2] == ["make", "plan"]:
+        if argv[:2] == ["make", "test"]:  # the suite itself: CI runs it (.ci/run)
+            skipped.append("make test: the test suite itself, run by CI")
+        elif argv[:2] == ["make", "plan"]:
             run += [Command(tuple(shlex.split(r)), code, line) for r in makefile_recipe("plan")]
         elif argv[0] in ("thermo-ddp", "python"):
             run.append(Command(tuple(argv), code, line))
         else:
-            raise ValueError(f"{block.id}: '{line}' is neither run by the tests (thermo-ddp, python, make plan) "
-                             "nor marked '# not tested: <why>'")
+            raise ValueError(f"{block.id}: '{line}' is neither run by the tests (thermo-ddp, python, make plan, "
+                             "make test) nor marked '# not tested: <why>'")
     return run, skipped
 
 
