@@ -2,7 +2,8 @@
 
 The convention, visible to a reader in the block itself (docs/contributing.md):
 - a ``python`` block is executed; an ``sh`` block's ``thermo-ddp``, ``python`` and ``make plan`` lines are
-  run as processes (``make test`` is the suite itself: listed as skipped); blocks in any other language (toml, json, text) are shown, not run;
+  run as processes (``make test`` is the suite itself: listed as skipped); blocks in any other language
+  (toml, json, text) are shown, not run;
 - ``# not tested: <why>`` on a block's first line skips the block, at the end of a line that line;
 - ``# needs ../shared/data/<file>`` runs the block or line only when that file is beside the project;
 - ``# exits N: <why>`` expects exit status N (1: a run that failed; 2: bad input, one line on stderr), on the
