@@ -3,7 +3,6 @@ inspected as matplotlib objects while the commands write them (the `figures_draw
 import re
 from pathlib import Path
 
-import pytest
 from conftest import axes_without_units
 
 from thermo_ddp.cli import main

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import DATA, ROOT
 from thermo_ddp.cli import main
-from thermo_ddp.model.parameters import dumps_parameters, load_parameters, packaged_parameter_file
+from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
 
 NETWORK = {"model": "network", "ambient_c": 25.0, "sensor": "winding",
            "node": [{"name": "winding", "capacity_j_per_k": 200.0}, {"name": "tooth", "capacity_j_per_k": 400.0}],

@@ -197,7 +197,7 @@ def _hessian_chunks(problem, layout, x, u, p):
 def _gradient_knot(problem, layout, knots, model_in, compiled):
     """First-order backward step with given gains (see _riccati.gradient_step) from the packed local
     model (compiled core) and composed with the local model (VM)."""
-    nx, nu = problem.nx, problem.nu
+    nx = problem.nx
     x, u, p, lam, _, rho = knots["syms"]
     a, pol = problem.functions.symbolic.sym("a", nx), problem.functions.symbolic.sym("policy", layout.n_policy)
     K = layout.feedback(pol)
