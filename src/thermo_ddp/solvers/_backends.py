@@ -50,7 +50,7 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
     lam, lamN = sym.sym("lam", problem.n_constraints), sym.sym("lamN", problem.n_terminal_constraints)
     rho = sym.sym("rho", problem.n_constraints)  # a penalty per row of g (of g_N: ``rhoN`` of the terminal knot)
-    model = knot_model(F, x, u, p, lam, rho, settings.full_second_order)
+    model = knot_model(F, x, u, p, lam, rho, settings.full_second_order, margin=settings.active_margin)
     second = model.pop("second_order_sym", None)
     knots = {"model": model, "second": second, "syms": (x, u, p, lam, lamN, rho)}
     knots["local"], model_in = _local_model_knot(problem, knots)
@@ -104,9 +104,8 @@ def _function(name, inputs, outputs, names_in, names_out, cse=True):
     return ca.Function(name, inputs, [ca.densify(o) for o in outputs], names_in, names_out, _CSE if cse else {})
 
 
-def penalties(problem, rho) -> np.ndarray:
-    """The penalty vector of the passes (rows of g, then of g_N) from one value per row or one for all."""
-    n = problem.n_constraints + problem.n_terminal_constraints
+def penalties(n: int, rho) -> np.ndarray:
+    """The penalty vector of the passes (``n`` rows: of g, then of g_N) from one value per row or one for all."""
     return np.ascontiguousarray(np.broadcast_to(np.asarray(rho, dtype=float).ravel(), (n,)))
 
 
@@ -167,7 +166,8 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
         back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
         ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     rhoN = F.symbolic.sym("rhoN", problem.n_terminal_constraints)
-    term = knot_model(F, x, None, p, lamN, rhoN, settings.full_second_order, terminal=True)
+    term = knot_model(F, x, None, p, lamN, rhoN, settings.full_second_order, terminal=True,
+                      margin=settings.active_margin)
     S_N = layout.pack_value(term["lx"], ca.DM.zeros(nx), term["lxx"])
     terminal = _function("ddp_back_terminal", [x, p, lamN, rhoN], [S_N], ["x", "p", "lamN", "rhoN"], ["S"])
     return back, composed, terminal
@@ -323,21 +323,21 @@ class CasadiBackend:
     name = "casadi"
 
     def __init__(self, problem, settings, layout, knots=None):
-        self.problem = problem
+        self.problem, self._n_rho = problem, problem.n_constraints + problem.n_terminal_constraints
         knots = knots or knot_functions(problem, settings, layout)
         self._f = {name: _BufferCall(f) for name, f in build_passes(problem, knots, layout).items()}
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, penalties(self.problem, rho), reg)
+        policy, summary, values = self._f["backward"](X, U, P, Lam, LamN, C, penalties(self._n_rho, rho), reg)
         return policy, summary.ravel(), values
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
         policy, summary, values, J, G, GN, C = self._f["evaluate_backward"](X, U, P, Lam, LamN,
-                                                                            penalties(self.problem, rho), reg)
+                                                                            penalties(self._n_rho, rho), reg)
         return (float(J[0, 0]), G, GN.ravel(), C), (policy, summary.ravel(), values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, penalties(self.problem, rho))
+        stat, costates = self._f["gradient"](X, U, P, Lam, LamN, policy, penalties(self._n_rho, rho))
         return float(stat[0, 0]), costates
 
     def forward(self, X, U, P, policy, C, alpha):
@@ -393,6 +393,7 @@ class CompiledBackend:
 
     def __init__(self, problem, library: ctypes.CDLL, layout: Layout):
         self._lib, self.problem = library, problem
+        self._n_rho = problem.n_constraints + problem.n_terminal_constraints
         _bind(library)
         nx, nu = problem.nx, problem.nu
         self._dims = {"x": nx, "u": nu, "p": problem.n_params, "g": problem.n_constraints,
@@ -426,19 +427,19 @@ class CompiledBackend:
         return results
 
     def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
+        N, rho = len(U), (penalties(self._n_rho, rho), 1, "rho")
         return tuple(self._call("ddp_backward", N, _knots(N, X, U, P, Lam, LamN) + [(C, N, "x"), rho, reg],
                                 [(N, "policy"), (0, 4), (N + 1, "value")]))
 
     def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
+        N, rho = len(U), (penalties(self._n_rho, rho), 1, "rho")
         policy, summary, values, J, G, GN, C = self._call(
             "ddp_evaluate_backward", N, _knots(N, X, U, P, Lam, LamN) + [rho, reg],
             [(N, "policy"), (0, 4), (N + 1, "value"), (0, 1), (N, "g"), (0, "gN"), (N, "x")])
         return (float(J[0]), G, GN, C), (policy, summary, values)
 
     def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        N, rho = len(U), (penalties(self.problem, rho), 1, "rho")
+        N, rho = len(U), (penalties(self._n_rho, rho), 1, "rho")
         stat, costates = self._call("ddp_gradient", N, _knots(N, X, U, P, Lam, LamN) + [(policy, N, "policy"), rho],
                                     [(0, 1), (N + 1, "x")])
         return float(stat[0]), costates
@@ -486,6 +487,7 @@ class NumpyBackend:
     def __init__(self, problem, settings, layout):
         knots = knot_functions(problem, settings, layout)
         self.problem, self.settings, self.layout = problem, settings, layout
+        self._n_rho = problem.n_constraints + problem.n_terminal_constraints
         self._eval = knots["eval"].map(problem.horizon)
         self._fwd, self._end = knots["fwd"], knots["end"]
         model, (x, u, p, lam, _, rho) = knots["model"], knots["syms"]
@@ -504,7 +506,7 @@ class NumpyBackend:
     def _knot_data(self, X, U, P, Lam, LamN, rho):
         """Per-knot derivatives (name -> (N, ...) arrays) and the terminal value S_N (arguments transposed)."""
         N = self.problem.horizon
-        ng, rho = self.problem.n_constraints, penalties(self.problem, rho)
+        ng, rho = self.problem.n_constraints, penalties(self._n_rho, rho)
         mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho[:ng])]
         data = {n: m.T if n in ("lx", "lu") else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
                 for m, s, n in zip(mats, self._shapes, self._names)}

@@ -47,7 +47,8 @@ def key(problem, settings) -> str | None:
     if structure is None:
         return None
     flags = tuple(settings.compiler_flags)
-    shape = (settings.full_second_order, settings.box_iterations, flags)  # the settings the code depends on
+    # the settings the code depends on
+    shape = (settings.full_second_order, settings.box_iterations, settings.active_margin, flags)
     host = codegen._host_tag() if any("native" in f for f in flags) else ""
     digest = hashlib.sha256(_sources())
     for part in (ca.__version__, repr(shape), structure, host):

@@ -114,17 +114,19 @@ class DDPSettings:
     pivot_jump: bool = False                # after a failed pass: reg to at least reg - 2 * (failed pivot)
     line_search_factor: float = 0.5
     line_search_min_step: float = 1e-4
+    nonmonotone_memory: int = 1             # Armijo against the largest merit of this many last iterates (1: monotone)
     armijo: float = 1e-4                    # fraction of the model decrease required
     penalty_init: float = 100.0             # AL penalty rho at a cold start
     penalty_factor: float = 10.0
     penalty_max: float = 1e8
     infeasibility_growth: float = 1e3       # "infeasible" if the violation has not halved while rho grew this much
+    active_margin: float = 0.0              # rows with lam > 0 within this of g = 0 get the penalty's curvature
     box_iterations: int = 8                 # projected-Newton steps per knot at most (nu > 1; see _riccati)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
     compiler_flags: tuple = ("-O2", "-march=native")  # gcc; big generated files at -O1/-O0 (see codegen)
 
     def __post_init__(self):
-        ints = ("max_iterations", "box_iterations", "inner_max_iterations")
+        ints = ("max_iterations", "box_iterations", "inner_max_iterations", "nonmonotone_memory")
         for name in ints:
             v = getattr(self, name)
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
@@ -137,7 +139,7 @@ class DDPSettings:
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0,
                     _SRC, name, v, "expected a finite number > 0")
-        for name in ("reg_init", "reg_min"):
+        for name in ("reg_init", "reg_min", "active_margin"):
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and np.isfinite(v) and v >= 0, _SRC, name, v, "expected a number >= 0")
         for name in ("line_search_factor", "armijo", "inner_tolerance_factor"):
@@ -172,6 +174,13 @@ class _Iterate:
     G: np.ndarray
     GN: np.ndarray
     C: np.ndarray
+    terms: float | None = None      # its augmented-Lagrangian terms at the current multipliers (None: not known)
+
+    def al_terms(self, lam, lamN, rho) -> float:
+        """The augmented-Lagrangian terms at (lam, lamN, rho), computed once per multiplier update."""
+        if self.terms is None:
+            self.terms = al.terms(self.G, self.GN, lam, lamN, rho)
+        return self.terms
 
 
 @dataclasses.dataclass(frozen=True)
@@ -232,6 +241,7 @@ class _Workspace:
     counts: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(PASS_COUNTS, 0))
     hist: dict = dataclasses.field(default_factory=lambda: {k: [] for k in HISTORY_KEYS})
     al_log: list = dataclasses.field(default_factory=list)  # al.Update at each multiplier update
+    recent: list = dataclasses.field(default_factory=list)  # merits of the last iterates at these multipliers
 
     def stop(self, status: str, message: str) -> None:
         self.status, self.message = status, message
@@ -240,7 +250,7 @@ class _Workspace:
         """Append this iteration's figures to the history; its read-only view."""
         it_, pr = self.it, solver.problem
         view = IterationView(
-            self.iteration, float(it_.J), float(it_.J + al.terms(it_.G, it_.GN, self.lam, self.lamN, self.rho)),
+            self.iteration, float(it_.J), float(it_.J + it_.al_terms(self.lam, self.lamN, self.rho)),
             constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub), float(gap), float(stat),
             float(step), float(self.reg), float(alpha), float(np.max(self.rho, initial=0.0)), self.tries)
         for key in HISTORY_KEYS:
@@ -390,6 +400,7 @@ class DDPSolver:
             ws.stop("infeasible", f"locally infeasible: the violation {ws.al_log[-1].violation:.3g} did not halve "
                     f"while the penalty grew {s.infeasibility_growth:g}x")
             return True
+        ws.recent, ws.it.terms = [], None
         ws.lam, ws.lamN, ws.rho, ws.viol_prev = al.update(s, ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho,
                                                           ws.viol_prev)
         ws.counts["multiplier_updates"] += 1
@@ -399,7 +410,7 @@ class DDPSolver:
         """The line search along the direction; on failure the regularisation grows (False)."""
         s = self.settings
         alpha, trial, ws.mu_gap, tries = self._line_search(ws.it, ws.P, d.policy, d.d1, d.d2, ws.lam, ws.lamN,
-                                                           ws.rho, ws.mu_gap)
+                                                           ws.rho, ws.mu_gap, max(ws.recent, default=-np.inf))
         ws.counts["forward_passes"] += tries
         ws.tries = tries
         if trial is None:
@@ -410,6 +421,9 @@ class DDPSolver:
             if ws.reg > s.reg_max:
                 ws.stop("line_search_failed", "no acceptable step up to reg_max")
             return False
+        if s.nonmonotone_memory > 1 and not ws.it.C.any():
+            merit = ws.it.J + ws.it.al_terms(ws.lam, ws.lamN, ws.rho)
+            ws.recent = (ws.recent + [merit])[-(s.nonmonotone_memory - 1):]
         ws.it, ws.alpha = trial, alpha
         return True
 
@@ -465,25 +479,29 @@ class DDPSolver:
                 reg_new = max(reg_new, jump)
         return reg_new
 
-    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap):
-        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty, forward passes)."""
+    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap, recent=-np.inf):
+        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty, forward passes).
+        ``recent``: the largest merit of the last iterates at these multipliers (nonmonotone reference, used
+        on gap-free iterates)."""
         s, be = self.settings, self.backend
         gap_l1 = float(np.sum(np.abs(it_.C)))
         if gap_l1 > 0:
             need = (d1 + 0.5 * max(d2, 0.0)) / (0.9 * gap_l1)
             mu_gap = max(mu_gap, need + 1e-8)
-        merit0 = it_.J + al.terms(it_.G, it_.GN, lam, lamN, rho) + mu_gap * gap_l1
+        merit0 = it_.J + it_.al_terms(lam, lamN, rho) + mu_gap * gap_l1
         noise = 1e-13 * (1.0 + abs(merit0))
+        reference = max(merit0, recent) if gap_l1 == 0 else merit0
         alpha, tries = 1.0, 0
         while alpha >= s.line_search_min_step:
             tries += 1
             X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
             if np.isfinite(J) and np.all(np.isfinite(X)):
-                merit = J + al.terms(G, GN, lam, lamN, rho) + mu_gap * (1 - alpha) * gap_l1
+                terms = al.terms(G, GN, lam, lamN, rho)
+                merit = J + terms + mu_gap * (1 - alpha) * gap_l1
                 model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
-                if merit - merit0 <= s.armijo * min(model, 0.0) + noise:
+                if merit - reference <= s.armijo * min(model, 0.0) + noise:
                     C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
-                    return alpha, _Iterate(X, U, J, G, GN, C), mu_gap, tries
+                    return alpha, _Iterate(X, U, J, G, GN, C, terms), mu_gap, tries
             alpha *= s.line_search_factor
         return alpha, None, mu_gap, tries
 
