@@ -13,11 +13,21 @@ about 4x the time). Counted, in benchmarks/results/planner_verdicts.json:
 - ``failed_as_verdict``: a plan that states a verdict while its decisive solve did not reach one (must be 0);
 - ``ddp_failed`` / ``ipopt_failed``: plans ``failed`` (no verdict: said so, exit 1), ``tracebacks`` (must be 0),
   ``refused``: requests refused as bad input before any work (e.g. a limit below the winding at rest);
-- ``ddp_ladder``: how the DDP plans reached their verdicts (which rung of the retry ladder).
+- ``ddp_ladder``: how the DDP plans reached their verdicts (which rung of the retry ladder);
+- ``certified`` (per row; ``disagree_certified`` / ``disagree_not_certified``): a disagreeing DDP verdict that
+  holds from both starts (:func:`certified`: IPOPT started from DDP's plan confirms its hold at its cost, and
+  one knot more is infeasible for IPOPT from its own start and from DDP's plan stretched by a knot): the oracle
+  is a local solver too, and where its own start finds another local optimum the two verdicts differ
+  (benchmarks/README.md). An agreeing row is certified as it stands.
+
+``--reuse JSON`` takes IPOPT's own-start verdicts (same request, same hold) from an earlier results file instead
+of solving them again (the transcription and IPOPT unchanged: the reused verdicts are what IPOPT would give;
+the count is ``ipopt_checks_reused``); IPOPT from DDP's plan is always solved.
 
     .venv/bin/python benchmarks/bench_planner_verdicts.py --workers 2   # 200 requests
     .venv/bin/python benchmarks/bench_planner_verdicts.py --quick    # 8 requests
     .venv/bin/python benchmarks/bench_planner_verdicts.py --recheck  # older results: IPOPT two knots past
+    .venv/bin/python benchmarks/bench_planner_verdicts.py --workers 2 --reuse old.json  # IPOPT's verdicts kept
 """
 from __future__ import annotations
 
@@ -46,18 +56,23 @@ def random_request(rng: np.random.Generator) -> dict:
 
 def run_plan(request: dict, solver: str) -> dict:
     """One plan's outcome as plain data (never raises: a traceback is recorded as such)."""
+    return _planned(request, solver)[0]
+
+
+def _planned(request: dict, solver: str):
+    """(:func:`run_plan`'s data, the plan or None)."""
     from thermo_ddp import InputError, plan_lift
     start = time.perf_counter()
     try:
         plan = plan_lift(**request, solver=solver)
     except InputError as err:
-        return {"outcome": "refused", "message": str(err)}
+        return {"outcome": "refused", "message": str(err)}, None
     except Exception:  # noqa: BLE001 - the count the benchmark exists for
-        return {"outcome": "traceback", "message": traceback.format_exc(limit=3)}
+        return {"outcome": "traceback", "message": traceback.format_exc(limit=3)}, None
     sv = plan.solver
     return {"outcome": "plan", "status": plan.status, "cause": plan.cause, "achieved_hold_s": plan.achieved_hold_s,
             "cost": sv["cost"], "solver_status": sv["status"], "attempts": sv["attempts"], "solves": sv["solves"],
-            "probes": sv["probes"], "wall_s": time.perf_counter() - start, "message": plan.message}
+            "probes": sv["probes"], "wall_s": time.perf_counter() - start, "message": plan.message}, plan
 
 
 def compare(ddp: dict, ipopt: dict, dt_s: float = 0.1) -> str:
@@ -84,24 +99,31 @@ def failed_as_verdict(r: dict) -> bool:
     return r["outcome"] == "plan" and r["status"] != "failed" and r["solver_status"] not in ("converged", "infeasible")
 
 
-def ipopt_at_boundary(request: dict, ddp: dict) -> dict:
+def _request_key(request: dict) -> str:
+    return json.dumps(request, sort_keys=True)
+
+
+def ipopt_at_boundary(request: dict, ddp: dict, cached: dict | None = None) -> dict:
     """IPOPT's verdicts on the same transcription where DDP's plan draws its line: the hold it achieved (must
     be feasible, at the same cost) and one knot longer (must be infeasible); for a feasible request the hold
     asked, for an infeasible one touching the goal. The same answer as IPOPT's own longest-hold search
-    (``--full-ipopt``) whenever feasibility is monotone in the hold, in 1-2 IPOPT solves instead of 4-8."""
+    (``--full-ipopt``) whenever feasibility is monotone in the hold, in 1-2 IPOPT solves instead of 4-8.
+    ``cached``: IPOPT's verdicts at these holds from an earlier run (knots -> check), taken as they are."""
     from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem, initial_guess, make_solver
-    from thermo_ddp.tasks.verdicts import verdict
     start = time.perf_counter()
     try:
         lp = build_lift_problem(LiftSettings(**request))
-        solver, top = make_solver(lp, "ipopt"), lp.hold_knots[1] - lp.hold_knots[0]
+        solver, top = [], lp.hold_knots[1] - lp.hold_knots[0]
         knots = round(ddp["achieved_hold_s"] / lp.settings.dt_s) if ddp["status"] != "infeasible" else -1
-        checks = {}
+        checks, cached = {}, cached or {}
 
         def check(k):
+            if str(k) in cached:
+                checks[k] = {**cached[str(k)], "reused": True}
+                return
+            solver[:] = solver or [make_solver(lp, "ipopt")]  # built only when a verdict is not reused
             probe = lp.with_hold(k * lp.settings.dt_s)
-            r = solver.solve(probe.x0, probe.params, initial_guess(probe))
-            checks[k] = {"verdict": verdict(r), "status": r.status, "reason": r.reason, "cost": r.cost}
+            checks[k] = _check(solver[0].solve(probe.x0, probe.params, initial_guess(probe)))
 
         for k in sorted({max(knots, 0), knots + 1} & set(range(top + 1))):
             check(k)
@@ -110,6 +132,47 @@ def ipopt_at_boundary(request: dict, ddp: dict) -> dict:
     except Exception:  # noqa: BLE001 - the count the benchmark exists for
         return {"outcome": "traceback", "message": traceback.format_exc(limit=3)}
     return _boundary_verdict(ddp, knots, checks, time.perf_counter() - start)
+
+
+def _check(result) -> dict:
+    from thermo_ddp.tasks.verdicts import verdict
+    return {"verdict": verdict(result), "status": result.status, "reason": result.reason, "cost": result.cost}
+
+
+def ipopt_from_ddp(request: dict, ddp: dict, plan) -> dict:
+    """IPOPT started from DDP's own plan: at DDP's hold (the plan's trajectories) and one knot longer (the plan
+    stretched by a knot, as the search warm-starts a probe): knots -> check. With IPOPT's verdicts from its
+    own start, they make the certified criterion (benchmarks/README.md)."""
+    from thermo_ddp.solvers import WarmStart
+    from thermo_ddp.tasks.hold_search import stretched_warm_start
+    from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem, make_solver
+    lp = build_lift_problem(LiftSettings(**request))
+    solver, top, dt = make_solver(lp, "ipopt"), lp.hold_knots[1] - lp.hold_knots[0], lp.settings.dt_s
+    knots = round(ddp["achieved_hold_s"] / dt) if ddp["status"] != "infeasible" else 0
+    at = lp.with_hold(knots * dt)
+    checks = {knots: _check(solver.solve(at.x0, at.params, WarmStart(plan.xs, plan.us)))}
+    if ddp["status"] != "infeasible" and knots + 1 <= top:
+        longer = lp.with_hold((knots + 1) * dt)
+        warm = stretched_warm_start((at, plan), knots + 1)
+        checks[knots + 1] = _check(solver.solve(longer.x0, longer.params, warm))
+    return checks
+
+
+def certified(ddp: dict, ipopt: dict) -> bool:
+    """DDP's verdict holds from both starts: its hold is feasible for IPOPT started from DDP's plan at DDP's cost
+    (1e-3), and one knot more (or, for "infeasible", touching the goal) is infeasible for IPOPT from its own
+    start and from DDP's plan stretched; a feasible request's hold needs only the first."""
+    warm = {int(k): v for k, v in ipopt.get("from_ddp", {}).items()}
+    cold = {int(k): v for k, v in ipopt.get("checks", {}).items()}
+    if not warm or ddp.get("outcome") != "plan" or ddp["status"] == "failed":
+        return False
+    if ddp["status"] == "infeasible":
+        return all(c.get(0, {}).get("verdict") == "infeasible" for c in (warm, cold))
+    k = min(warm)
+    same = warm[k]["verdict"] == "feasible" and abs(warm[k]["cost"] - ddp["cost"]) <= COST_RTOL * max(
+        1.0, abs(ddp["cost"]))
+    longer = k + 1 not in warm or all(c.get(k + 1, {}).get("verdict") == "infeasible" for c in (warm, cold))
+    return same and longer
 
 
 def _boundary_verdict(ddp: dict, knots: int, checks: dict, wall_s: float) -> dict:
@@ -129,12 +192,27 @@ def _boundary_verdict(ddp: dict, knots: int, checks: dict, wall_s: float) -> dic
             "solver_status": "converged" if status != "failed" else "failed", "wall_s": wall_s}
 
 
-def run_pair(request: dict, full_ipopt: bool = False) -> tuple[dict, dict]:
+def run_pair(request: dict, full_ipopt: bool = False, cached: dict | None = None) -> tuple[dict, dict]:
     logging.getLogger("thermo_ddp").setLevel(logging.ERROR)
-    ddp = run_plan(request, "ddp")
+    ddp, plan = _planned(request, "ddp")
     if full_ipopt or ddp["outcome"] != "plan" or ddp["status"] == "failed":
         return ddp, run_plan(request, "ipopt")
-    return ddp, ipopt_at_boundary(request, ddp)
+    ipopt = ipopt_at_boundary(request, ddp, cached)
+    if compare(ddp, ipopt) == "disagree":
+        try:
+            ipopt["from_ddp"] = ipopt_from_ddp(request, ddp, plan)
+        except Exception:  # noqa: BLE001 - the count the benchmark exists for
+            return ddp, {"outcome": "traceback", "message": traceback.format_exc(limit=3)}
+    return ddp, ipopt
+
+
+def _cached_checks(path: str | None) -> dict:
+    """IPOPT's verdicts by request from an earlier results file (``--reuse``): request key -> knots -> check."""
+    if not path:
+        return {}
+    rows = json.loads(open(path).read())["rows"]
+    return {_request_key(r["request"]): {k: {f: v[f] for f in ("verdict", "status", "reason", "cost")}
+                                         for k, v in r["ipopt"].get("checks", {}).items()} for r in rows}
 
 
 def main():
@@ -144,6 +222,8 @@ def main():
     ap.add_argument("--workers", type=int, default=1, help="processes (each request's two plans run in one)")
     ap.add_argument("--quick", action="store_true", help="8 requests (a smoke run)")
     ap.add_argument("--full-ipopt", action="store_true", help="IPOPT plans every request itself (its own search)")
+    ap.add_argument("--reuse", metavar="JSON",
+                    help="IPOPT's own-start verdicts from an earlier results file where the same request and hold")
     ap.add_argument("--recheck", action="store_true",
                     help="re-judge results/planner_verdicts.json: IPOPT two knots past DDP's hold where it held one")
     args = ap.parse_args()
@@ -152,10 +232,14 @@ def main():
     n = 8 if args.quick else args.requests
     rng = np.random.default_rng(args.seed)
     requests = [random_request(rng) for _ in range(n)]
-    rows = []
+    rows, cache = [], _cached_checks(args.reuse)
+    cached = [cache.get(_request_key(r)) for r in requests]
     with concurrent.futures.ProcessPoolExecutor(args.workers) as pool:
-        for k, (request, (ddp, ipopt)) in enumerate(zip(requests, pool.map(run_pair, requests, [args.full_ipopt] * n))):
-            rows.append({"request": request, "ddp": ddp, "ipopt": ipopt, "comparison": compare(ddp, ipopt)})
+        for k, (request, (ddp, ipopt)) in enumerate(zip(requests, pool.map(run_pair, requests, [args.full_ipopt] * n,
+                                                                           cached))):
+            comparison = compare(ddp, ipopt)
+            rows.append({"request": request, "ddp": ddp, "ipopt": ipopt, "comparison": comparison,
+                         "certified": comparison == "agree" or certified(ddp, ipopt)})
             print(f"{k + 1:3d}/{n} {request}: DDP {ddp.get('status', ddp['outcome'])} {ddp.get('achieved_hold_s', '')}"
                   f" | IPOPT {ipopt.get('status', ipopt['outcome'])} {ipopt.get('achieved_hold_s', '')}: "
                   f"{rows[-1]['comparison']}", flush=True)
@@ -197,6 +281,9 @@ def _write(args, n, rows):
         "agree_ipopt_one_knot_longer": sum(1 for r in rows if r["comparison"] == "agree"
                                            and r["ipopt"].get("status") == "one_knot_longer"),
         "converged_ddp_verdicts": sum(1 for r in rows if r["comparison"] in ("agree", "disagree")),
+        "disagree_certified": sum(1 for r in rows if r["comparison"] == "disagree" and r.get("certified")),
+        "disagree_not_certified": sum(1 for r in rows if r["comparison"] == "disagree" and not r.get("certified")),
+        "ipopt_checks_reused": sum(1 for r in rows for c in r["ipopt"].get("checks", {}).values() if c.get("reused")),
         "ddp_ladder": dict(collections.Counter(" > ".join(p["attempts"]) for p in plans)),
         "ddp_statuses": dict(collections.Counter(p["status"] for p in plans)),
         "ddp_causes": dict(collections.Counter(str(p["cause"]) for p in plans)),

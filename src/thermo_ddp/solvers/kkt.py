@@ -19,6 +19,8 @@ projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhe
 """
 from __future__ import annotations
 
+import weakref
+
 import casadi as ca
 import numpy as np
 
@@ -32,11 +34,10 @@ def constraint_rows(problem) -> tuple[list[str], list[str]]:
             [c.name for c in problem.terminal_constraints for _ in range(c.size)])
 
 
-class KKTEvaluator:
-    """The residuals of :data:`KKT_KEYS` at an iterate; built once per problem structure (any horizon)."""
+class _KnotFunctions:
+    """The residuals' per-knot CasADi functions of one problem structure and their maps per horizon."""
 
     def __init__(self, problem):
-        self.problem = problem
         F = problem.functions
         sym = F.symbolic
         x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
@@ -45,13 +46,31 @@ class KKTEvaluator:
         f, g = F.step(x, u, p), F.stage_constraint(x, u, p)
         L = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(mu, g) + ca.dot(lam_next, f)
         Lx, Lu = ca.gradient(L, x), ca.gradient(L, u)
-        self._stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
+        self.stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
         # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input)
-        self._adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu], [Lx])
+        self.adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu], [Lx])
         gN = F.terminal_constraint(x, p)
         LN = 0.5 * ca.sumsqr(F.terminal_residual(x, p)) + ca.dot(muN, gN)
-        self._terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
-        self._maps: dict[int, tuple[ca.Function, ca.Function]] = {}
+        self.terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
+        self.maps: dict[int, tuple[ca.Function, ca.Function]] = {}
+
+
+# per problem structure (its ProblemFunctions, shared by every horizon): a solver built per plan builds none
+_KNOTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+class KKTEvaluator:
+    """The residuals of :data:`KKT_KEYS` at an iterate; its functions built once per problem structure (any
+    horizon, every evaluator of that structure)."""
+
+    def __init__(self, problem):
+        self.problem = problem
+        knots = _KNOTS.get(problem.functions)
+        if knots is None:
+            knots = _KNOTS[problem.functions] = _KnotFunctions(problem)
+        self._knots = knots
+        self._stage, self._adjoint, self._terminal = knots.stage, knots.adjoint, knots.terminal
+        self._maps = knots.maps
 
     def _mapped(self, N: int):
         if N not in self._maps:

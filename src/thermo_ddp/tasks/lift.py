@@ -338,8 +338,13 @@ def time_to_limit_s(model: ActuatedArm, x_start: np.ndarray, q_goal: float, limi
     temperatures of ``x_start`` (inf: not within ``horizon_s``)."""
     joint = model.joints[0]
     temperatures = np.asarray(x_start, dtype=float)[2 * model.nu:]
-    return time_to_limit_by_joint(model, model.static_current_a([q_goal]), temperatures, {joint: limit_c},
-                                  horizon_s, dt_s)[joint]
+    # the first minute first: a plan's own boundary is usually seconds away (3600 s cost 25-50 ms a plan)
+    for horizon in sorted({min(60.0, horizon_s), horizon_s}):
+        ttl = time_to_limit_by_joint(model, model.static_current_a([q_goal]), temperatures, {joint: limit_c},
+                                     horizon, dt_s)[joint]
+        if math.isfinite(ttl):
+            return ttl
+    return ttl
 
 
 def plan_lift(payload_kg: float | None = None, limit_c: float | None = None, hold_s: float | None = None, *,
