@@ -86,6 +86,9 @@ def bench_plan(payload_kg: float, limit_c: float, hold_s: float, repeats: int) -
                       "probes": plan.solver["probes"],
                       "status": plan.status, "achieved_hold_s": plan.achieved_hold_s, "work": plan.solver["work"],
                       "iterations_last": plan.solver["iterations"], "cost": plan.solver["cost"],
+                      "forward_passes_per_iteration": (plan.solver["work"]["forward_passes"]
+                                                       / max(plan.solver["work"]["iterations"], 1)
+                                                       if "forward_passes" in plan.solver["work"] else None),
                       "max_violation": plan.solver["max_constraint_violation"],
                       "motion": {"reversals": m.reversals, "max_speed_near_stop_rad_s": m.max_speed_near_stop_rad_s,
                                  "final_speed_rad_s": m.final_speed_rad_s, "inside_range": m.inside_range,
@@ -94,6 +97,7 @@ def bench_plan(payload_kg: float, limit_c: float, hold_s: float, repeats: int) -
               f"{out[label]['wall_median_s']:.3f} s wall, {out[label]['solve_s']:.3f} s in {plan.solver['solves']} "
               f"solve(s), {plan.status}, hold {plan.achieved_hold_s:.1f} s, work {plan.solver['work']}", flush=True)
     out["ipopt_over_ddp_wall"] = out["ipopt"]["wall_median_s"] / out["ddp"]["wall_median_s"]
+    out["ipopt_over_ddp_wall_min"] = out["ipopt"]["wall_min_s"] / out["ddp"]["wall_min_s"]
     out["ipopt_over_ddp_solve"] = out["ipopt"]["solve_s"] / out["ddp"]["solve_s"]
     out["careful_over_careful_off_ddp_wall"] = out["ddp"]["wall_median_s"] / out["ddp_careful_off"]["wall_median_s"]
     dt = LiftSettings().dt_s

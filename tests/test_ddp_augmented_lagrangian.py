@@ -68,3 +68,27 @@ def test_flat_rule_never_accepts_a_large_gradient():
                                                                                                            goal)
     assert not flat.success
     assert flat.kkt["stationarity"] > DDPSettings().flat_stationarity * (1 + abs(flat.cost))
+
+
+def test_a_row_with_a_multiplier_just_short_of_its_kink_gets_the_penalty_curvature():
+    """knot_model's Hessian: rho Jg'Jg on a row with lam + rho g > 0 (active), and with ``margin`` also on a row
+    with lam > 0 within ``margin`` of g = 0; never on a row without a multiplier or beyond the margin."""
+    import types
+
+    import casadi as ca
+
+    from thermo_ddp.solvers._riccati import knot_model
+
+    x, u, p = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p")
+    F = types.SimpleNamespace(stage_residual=lambda x, u, p: u, stage_constraint=lambda x, u, p: ca.vertcat(u - 1, u - 2),
+                              step=lambda x, u, p: x + u, step_jacobians=None)
+    lam, rho = ca.SX.sym("lam", 2), ca.SX.sym("rho", 2)
+    luu = {m: ca.Function("luu", [u, lam, rho], [knot_model(F, x, u, p, lam, rho, False, margin=m)["luu"]])
+           for m in (0.0, 1e-4)}
+    rho_v = [1e4, 1e4]
+    short = 1.0 - 6e-5  # row 1 at g = -6e-5: lam + rho g = 0.5 - 0.6 (not active), within the margin
+    assert float(luu[0.0](short, [0.5, 0.0], rho_v)) == pytest.approx(1.0)
+    assert float(luu[1e-4](short, [0.5, 0.0], rho_v)) == pytest.approx(1.0 + 1e4)
+    assert float(luu[1e-4](short, [0.0, 0.0], rho_v)) == pytest.approx(1.0)          # no multiplier
+    assert float(luu[1e-4](1.0 - 1e-3, [0.5, 0.0], rho_v)) == pytest.approx(1.0)     # beyond the margin
+    assert float(luu[0.0](1.0 + 1e-3, [0.0, 0.0], rho_v)) == pytest.approx(1.0 + 1e4)  # violated: active

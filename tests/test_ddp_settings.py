@@ -18,7 +18,8 @@ PROBLEM = OptimalControlProblem(
 @pytest.mark.parametrize("options", [
     {"max_iterations": -1}, {"max_iterations": 2.5}, {"tolerance": 0.0}, {"tolerance": float("nan")},
     {"reg_factor": 1.0}, {"line_search_factor": 1.5}, {"backend": "fortran"}, {"full_second_order": "yes"},
-    {"reg_init": 1e12}, {"penalty_init": 1e9}, {"armijo": 0.0},
+    {"reg_init": 1e12}, {"penalty_init": 1e9}, {"armijo": 0.0}, {"active_margin": -1e-4},
+    {"nonmonotone_memory": -1}, {"nonmonotone_memory": 2.5},
 ])
 def test_bad_settings_raise(options):
     with pytest.raises(InputError):

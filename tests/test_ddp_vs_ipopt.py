@@ -46,6 +46,17 @@ def test_ddp_and_ipopt_reach_the_same_optimum(case):
     assert np.all(res.multipliers["constraints"][:, 1:][voltage_active] > 0)
 
 
+def test_active_margin_and_nonmonotone_search_reach_ipopts_optimum(case):
+    """The lift's line-search options (rows near their kink in the model, a nonmonotone Armijo reference) change
+    the path, not the optimum: IPOPT's cost and active set."""
+    t_max, problem, ref = case
+    settings = DDPSettings(backend="casadi", full_second_order=True, active_margin=1e-4, nonmonotone_memory=3)
+    res = DDPSolver(problem, settings).solve(x0_of(), GOAL)
+    assert res.success, res.message
+    assert abs(res.cost - ref.cost) <= 1e-4 * ref.cost and res.max_constraint_violation <= 1e-5
+    assert np.array_equal(active_set(problem, res, 1e-4), active_set(problem, ref, 1e-4))
+
+
 def test_full_ddp_needs_no_more_iterations_than_gauss_newton():
     """With the winding limit active the heating curvature (R i^2) matters: full DDP uses it."""
     problem = thermal_pendulum(t_max=ACTIVE_C)

@@ -190,6 +190,14 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     assert plan.motion.max_speed_near_stop_rad_s == pytest.approx(m.max_speed_near_stop_rad_s, abs=1e-6)
 
 
+def test_default_searches_take_three_solves_and_few_forward_passes(default_plan):
+    """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer in 3 complete
+    solves, with at most 1.5 forward passes (line-search trials) per DDP iteration over the whole search."""
+    work = default_plan.solver["work"]
+    assert default_plan.solver["solves"] <= 3 and default_plan.solver["attempts"] == ["ddp"]
+    assert work["forward_passes"] <= 1.5 * work["iterations"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("limit_c", [84.0, 140.0])
 def test_default_plan_holds_as_long_with_ddp_as_with_ipopt(limit_c):

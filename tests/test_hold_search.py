@@ -1,0 +1,45 @@
+"""The longest-hold search's helpers (tasks/hold_search.py): the thermal prediction's bracket and the warm start
+of a probe from its neighbour's solution."""
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+
+from thermo_ddp.tasks.hold_search import _gallop, stretched_warm_start
+from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem, initial_guess
+
+
+def test_gallop_brackets_the_last_fitting_hold_from_any_start():
+    """Against the answer of a monotone predicate (fits up to ``answer``), from every start: lo fits (or -1),
+    hi does not (or top + 1), only holds inside [0, top] asked."""
+    rng = np.random.default_rng(0)
+    for _ in range(500):
+        top = int(rng.integers(0, 40))
+        answer, start = int(rng.integers(-1, top + 1)), int(rng.integers(0, top + 1))
+        asked = []
+        lo, hi = _gallop(lambda k: asked.append(k) or k <= answer, start, top)
+        assert lo <= answer < hi and -1 <= lo and hi <= top + 1
+        assert all(0 <= k <= top for k in asked)
+
+
+@pytest.fixture(scope="module")
+def lift():
+    return build_lift_problem(LiftSettings(payload_kg=20.0, limit_c=140.0, hold_s=6.0))
+
+
+@pytest.mark.parametrize("shift", [-7, -1, 1, 5])
+def test_a_stretched_solution_lowers_where_the_probe_lowers(lift, shift):
+    """The initial guess of a probe (angles on its reference, static currents) stretched to another hold is that
+    hold's own guess: the lowering moves with the hold's end, the horizon stays."""
+    knots = 30
+    src = lift.with_hold(knots * lift.settings.dt_s)
+    guess = initial_guess(src)
+    warm = stretched_warm_start((src, types.SimpleNamespace(xs=guess.xs, us=guess.us)), knots + shift)
+    want = initial_guess(lift.with_hold((knots + shift) * lift.settings.dt_s))
+    q = lift.model.index(lift.model.joints[0], "q_rad")
+    assert warm.xs.shape == want.xs.shape and warm.us.shape == want.us.shape
+    np.testing.assert_allclose(warm.xs[:, q], want.xs[:, q], atol=1e-12)
+    np.testing.assert_allclose(warm.us, want.us, atol=1e-12)
+    assert not warm.multipliers
