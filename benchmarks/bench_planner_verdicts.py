@@ -238,6 +238,8 @@ def main():
                     help="IPOPT's own-start verdicts from an earlier results file where the same request and hold")
     ap.add_argument("--certify", action="store_true",
                     help="judge the disagreeing rows of results/planner_verdicts.json again by the certified criterion")
+    ap.add_argument("--rerun-careful-off", action="store_true",
+                    help="plan again the requests of results/planner_verdicts.json with careful motion off")
     ap.add_argument("--recheck", action="store_true",
                     help="re-judge results/planner_verdicts.json: IPOPT two knots past DDP's hold where it held one")
     args = ap.parse_args()
@@ -245,6 +247,8 @@ def main():
         return recheck(args)
     if args.certify:
         return certify(args)
+    if args.rerun_careful_off:
+        return rerun_careful_off(args)
     n = 8 if args.quick else args.requests
     rng = np.random.default_rng(args.seed)
     requests = [random_request(rng) for _ in range(n)]
@@ -261,6 +265,24 @@ def main():
                   f"{rows[-1]['comparison']}", flush=True)
             if (k + 1) % 10 == 0 or k + 1 == n:  # partial results survive an interrupted run
                 _write(args, n, rows)
+
+
+def rerun_careful_off(args):
+    """The rows of results/planner_verdicts.json with careful motion off planned again (after a change of the
+    solver's options for them), IPOPT's own-start verdicts reused from ``--reuse`` and those rows."""
+    data = json.loads((RESULTS / "planner_verdicts.json").read_text())
+    cache = {**_cached_checks(args.reuse), **_cached_checks(str(RESULTS / "planner_verdicts.json"))}
+    index = [k for k, r in enumerate(data["rows"]) if not r["request"]["careful_motion"]]
+    requests = [data["rows"][k]["request"] for k in index]
+    with concurrent.futures.ProcessPoolExecutor(args.workers) as pool:
+        pairs = pool.map(run_pair, requests, [False] * len(requests), [cache.get(_request_key(r)) for r in requests])
+        for n, (k, request, (ddp, ipopt)) in enumerate(zip(index, requests, pairs)):
+            comparison = compare(ddp, ipopt)
+            data["rows"][k] = {"request": request, "ddp": ddp, "ipopt": ipopt, "comparison": comparison,
+                               "certified": comparison == "agree" or certified(ddp, ipopt)}
+            print(f"{n + 1}/{len(index)} {request}: {comparison}", flush=True)
+    args.seed = data["summary"]["seed"]
+    _write(args, data["summary"]["of"], data["rows"])
 
 
 def recheck(args):

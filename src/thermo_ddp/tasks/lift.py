@@ -75,6 +75,9 @@ SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 DDP_OPTIONS = DDPSettings(full_second_order=True, inner_tolerance_init=0.1, inner_tolerance_factor=0.3,
                           inner_max_iterations=20, reg_decrease=10.0 ** 0.5, pivot_jump=True, active_margin=1e-4,
                           nonmonotone_memory=3)
+# Careful motion off, no margin: with it the 40 kg 84 °C search took 7 solves, 964 iterations and an IPOPT rung,
+# without 4 solves and 291 iterations, the same hold (benchmarks/README.md, issue 23).
+DDP_OPTIONS_CAREFUL_OFF = dataclasses.replace(DDP_OPTIONS, active_margin=0.0)
 DEFAULT_OPTIONS = {"ddp": DDP_OPTIONS}
 _SRC = "plan_lift"
 _PHASE_S = Bound(1e-3, 600.0, "s", "a lift or lowering phase: seconds, not hours")
@@ -323,7 +326,10 @@ def build_lift_problem(settings: LiftSettings, model: ActuatedArm | None = None)
 def make_solver(lp: LiftProblem, solver: str | None = None, options: Mapping[str, Any] | None = None):
     """A solver instance for the lift's OCP (built once, reusable for every hold and warm start)."""
     name = solver or lp.settings.solver
-    return SOLVERS[name](lp.problem, options if options is not None else DEFAULT_OPTIONS.get(name))
+    if options is None:
+        careful_off = name == "ddp" and not lp.settings.careful_motion
+        options = DDP_OPTIONS_CAREFUL_OFF if careful_off else DEFAULT_OPTIONS.get(name)
+    return SOLVERS[name](lp.problem, options)
 
 
 def solve(lp: LiftProblem, solver=None, warm_start: WarmStart | None = None) -> SolverResult:
