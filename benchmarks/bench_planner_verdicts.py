@@ -204,6 +204,23 @@ def certify(args):
     _write(args, data["summary"]["of"], data["rows"])
 
 
+def _boundary_verdict(ddp: dict, knots: int, checks: dict, wall_s: float) -> dict:
+    checks = {int(k): v for k, v in checks.items()}
+    if any(c["verdict"] is None for c in checks.values()):
+        status = "failed"
+    elif knots >= 0 and checks[knots]["verdict"] != "feasible":
+        status = "infeasible" if knots == 0 else "shorter"  # IPOPT cannot hold what DDP held
+    elif checks.get(knots + 1, {}).get("verdict") == "feasible":
+        # IPOPT's longest hold is one knot longer than DDP's (within the criterion), or more
+        status = "one_knot_longer" if checks.get(knots + 2, {}).get("verdict") != "feasible" else "longer"
+    else:
+        status = ddp["status"]
+    achieved = {ddp["status"]: ddp["achieved_hold_s"], "one_knot_longer": ddp["achieved_hold_s"] + 0.1}.get(status)
+    cost = checks[knots]["cost"] if knots >= 0 and knots in checks else float("nan")
+    return {"outcome": "plan", "status": status, "achieved_hold_s": achieved, "cost": cost, "checks": checks,
+            "solver_status": "converged" if status != "failed" else "failed", "wall_s": wall_s}
+
+
 def run_pair(request: dict, full_ipopt: bool = False, cached: dict | None = None) -> tuple[dict, dict]:
     logging.getLogger("thermo_ddp").setLevel(logging.ERROR)
     ddp, plan = _planned(request, "ddp")
