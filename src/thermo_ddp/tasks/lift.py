@@ -70,7 +70,7 @@ SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # the lift (benchmarks/README.md): a looser first inner tolerance (0.1, x0.3 per loop, 20 inner iterations
 # at most), a slower regularisation decrease and the pivot jump cut the infeasible probe of the
 # longest-hold search from 146 to 95 iterations.
-# The active margin and the nonmonotone line search (3 iterates) took the default searches from 2.5-3.3 to
+# The active margin and the nonmonotone line search (3 iterates) took the default searches from 2.3-3.3 to
 # 1.4-1.5 forward passes per iteration, with no failed line search (benchmarks/README.md, issue 23).
 DDP_OPTIONS = DDPSettings(full_second_order=True, inner_tolerance_init=0.1, inner_tolerance_factor=0.3,
                           inner_max_iterations=20, reg_decrease=10.0 ** 0.5, pivot_jump=True, active_margin=1e-4,
