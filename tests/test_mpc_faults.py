@@ -173,7 +173,7 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
 
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant():
-    """Careful motion in the planner (off by default) on the default plant, 15 % hotter than planned: its
+    """Careful motion in the planner (on by default) on the default plant, 15 % hotter than planned: its
     one_way and stop_approach bind from x_1 on (as the winding limit), so a measured speed against the phase's
     direction or near the stop does not make re-solves infeasible at knot 0 (16 of 165 periods fell back with
     them on x_0). The true winding stays under the limit; the executed approach to the stop is slow, the arm at

@@ -66,8 +66,7 @@ class ControllerSettings:
     planner plans from the estimate with every thermal node raised by ``uncertainty_sigmas`` standard
     deviations of the winding estimate, plus ``sensor_fault_backoff_c`` once the casing sensor is
     distrusted; ``derate`` caps the fallback current at the no-heating current near the limit;
-    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (off: the warm re-solves' figures
-    of benchmarks/mpc_step are without it)."""
+    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (on, as the lift's)."""
 
     control_period_s: float = 0.1        # = the planner's knot spacing
     horizon_knots: int = 200
@@ -84,7 +83,7 @@ class ControllerSettings:
     derate: bool = True
     ambient_change_c: float = 1.0        # the planner's ambient follows the room beyond this change
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
-    careful_motion: bool = False         # one_way and stop_approach then bind from x_1 on (mpc.controller)
+    careful_motion: bool = True          # one_way and stop_approach then bind from x_1 on (mpc.controller)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
