@@ -2,9 +2,10 @@
 
 The solver-level step on the controller's problem (no controller loop logic from thermo_ddp.mpc): the lift of
 bench_lift_ocp (40 kg, 20 s scenario) with careful motion on (the controller's default) and off, transcribed as
-the receding-horizon controller does (mpc.controller.limit_on_next_state: the winding limit, stop_approach and
-one_way on x_{k+1}, never on the measured x_0; the soft back-off band), under 140 °C (limit inactive)
-and 94 °C (limit active in every prediction: it binds near the end of the hold, inside the 200-knot horizon).
+the receding-horizon controller does (mpc.controller.limit_on_next_state: the winding limit on x_{k+1}, never on
+the measured x_0, with its soft back-off band; the hold band and careful motion's rows soft), under 140 °C (limit
+inactive) and 94 °C (limit active in every prediction: it binds near the end of the hold, inside the 200-knot
+horizon).
 Closed loop over ``--steps`` steps from the start: the plant is the model's own step with DDP's first current,
 then a velocity disturbance (1e-2 rad/s, seeded); at each step every solver solves the same problem (the
 measured state, the per-knot reference moved on by one knot, its last knot repeated), warm-started from its
@@ -40,10 +41,10 @@ VELOCITY_DISTURBANCE = 1e-2  # rad/s, standard deviation
 
 
 def controller_problem(limit_c: float, careful: bool):
-    """The bench's lift as the controller transcribes it (rows on the state alone on x_{k+1}, soft back-off)."""
+    """The bench's lift as the controller transcribes it (winding limit on x_{k+1}, soft back-off, soft motion rows)."""
     lp = lift_problem(KNOTS, limit_c, careful_motion=careful)
-    problem = limit_on_next_state(lp.problem, CONTROLLER.scenario.backoff_c,
-                                  CONTROLLER.controller.backoff_weight_per_k2)
+    c = CONTROLLER.controller
+    problem = limit_on_next_state(lp.problem, CONTROLLER.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight)
     return dataclasses.replace(lp, problem=problem)
 
 

@@ -67,8 +67,8 @@ class ControllerSettings:
     planner plans from the estimate with every thermal node raised by ``uncertainty_sigmas`` standard
     deviations of the winding estimate, plus ``sensor_fault_backoff_c`` once the casing sensor is
     distrusted; ``derate`` caps the fallback current at the no-heating current near the limit;
-    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (on, as the lift's); the hold band
-    and careful motion's rows cost ``0.5 * motion_weight * excess^2`` (rad, rad/s) instead of binding (0: hard)."""
+    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (on, as the lift's); its rows cost
+    ``0.5 * motion_weight * excess_rad_s^2`` instead of binding (0: hard, from x_1 on)."""
 
     control_period_s: float = 0.1        # = the planner's knot spacing
     horizon_knots: int = 200
@@ -86,7 +86,7 @@ class ControllerSettings:
     ambient_change_c: float = 1.0        # the planner's ambient follows the room beyond this change
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
     careful_motion: bool = True          # one_way and stop_approach in the planner (mpc.controller)
-    motion_weight: float = 1e4           # > 0: hold band and careful motion soft, 0.5 * w * excess^2 (mpc.controller)
+    motion_weight: float = 10.0          # > 0: careful motion's rows soft, 0.5 * w * excess^2 (mpc.controller)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
