@@ -81,7 +81,8 @@ def mpc_loop(limit_c: float, careful: bool, steps: int, repeats: int) -> dict:
                                    "max_violation": float(result.max_constraint_violation),
                                    **{k: result.info[k] for k in PASSES if k in result.info}})
             now[name] = result
-        if "winding_limit" in binding_constraints(dataclasses.replace(lp, x0=x, params=params), now["ddp"]):
+        binding = binding_constraints(dataclasses.replace(lp, x0=x, params=params), now["ddp"])
+        if any(name.startswith("winding_limit") for name in binding):  # winding_limit_next in the controller
             active_steps += 1
         prev = now
     out = {"steps": steps, "repeats": repeats, "winding_limit_binding_in_prediction_steps": active_steps}
