@@ -121,8 +121,9 @@ def limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backof
 
 # The re-solves' stopping rule: |Qu|_inf <= 1e-5 and constraint rows within 1e-4 (K, rad, rad/s, V): a tenth of the
 # violation the controller accepts (ControllerSettings.feasibility_tolerance). Measured on bench_mpc_step's loop
-# (careful motion, 94 and 140 °C): the first current within 1.3e-3 A of IPOPT's (tol 1e-8), costs within 1e-4
-# (relative); half the backward passes of 1e-6 / 1e-6 at 140 °C.
+# (careful motion, 140 / 94 °C): the first current within 3.7e-5 / 7.6e-3 A of IPOPT's (tol 1e-8), costs within
+# 8e-12 / 1.4e-4 (relative); with careful motion's rows hard, 1.4 / 3.1 backward passes per re-solve against
+# 3.1 / 5.2 at 1e-6 / 1e-6.
 MPC_TOLERANCES = {"tolerance": 1e-5, "constraint_tolerance": 1e-4}
 
 
