@@ -177,3 +177,30 @@ def test_perturbed_model_with_unit_scales_is_the_model():
     model, _ = build_models(MPCSettings())
     same = perturbed_model(model)
     assert np.allclose(same.idle_temperatures(), model.idle_temperatures())
+
+
+def test_warm_start_moves_the_multipliers_one_knot_and_frees_the_present_states_rows():
+    """The controller's warm start: stage multipliers moved on one knot (last repeated), those of the hold band at
+    knot 0 (switched off on the measured state by the window) zero, the penalty capped."""
+    from thermo_ddp.mpc.controller import shifted_warm_start
+    from thermo_ddp.solvers import SolverResult
+    from thermo_ddp.solvers.kkt import constraint_rows
+
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
+    pr = planning_problem(settings, build_models(settings)[0]).problem
+    rng = np.random.default_rng(0)
+    lam = rng.uniform(0.1, 1.0, (pr.horizon, pr.n_constraints))
+    rho = np.full(pr.n_constraints + pr.n_terminal_constraints, 1e8)
+    xs, us = rng.normal(size=(pr.horizon + 1, pr.nx)), rng.normal(size=(pr.horizon, pr.nu))
+    result = SolverResult("ddp", True, "converged", "", xs, us, 0.0, 0.0, 1, 0.0,
+                          multipliers={"constraints": lam, "terminal_constraints": np.ones(pr.n_terminal_constraints),
+                                       "penalty": rho})
+    warm = shifted_warm_start(result, pr, 1, penalty_max=1e6)
+    band = np.array(constraint_rows(pr)[0]) == "hold_band"
+    moved = warm.multipliers["constraints"]
+    assert band.sum() == 2 and np.all(moved[0, band] == 0)
+    np.testing.assert_array_equal(moved[0, ~band], lam[1, ~band])
+    np.testing.assert_array_equal(moved[1:-1], lam[2:])
+    np.testing.assert_array_equal(moved[-1], lam[-1])
+    np.testing.assert_array_equal(warm.xs[:-1], xs[1:])
+    assert np.all(warm.multipliers["penalty"] == 1e6)

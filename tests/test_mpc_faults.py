@@ -172,19 +172,23 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
     assert soft.success and soft.margin_c > 0
 
 
-def test_careful_motion_planner_keeps_planning_a_hotter_plant():
-    """Careful motion in the planner (off by default) on the default plant, 15 % hotter than planned: its
-    one_way and stop_approach bind from x_1 on (as the winding limit), so a measured speed against the phase's
-    direction or near the stop does not make re-solves infeasible at knot 0 (16 of 165 periods fell back with
-    them on x_0). The true winding stays under the limit; the executed approach to the stop is slow, the arm at
-    rest at the end."""
+def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
+    """Careful motion in the planner (on by default) on the default plant, 15 % hotter than planned: its
+    one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight), the winding limit binds
+    from x_1 on, so a measured speed against the phase's direction or near the stop does not make re-solves
+    infeasible (16 of 165 periods fell back with the careful rows hard on x_0). The true winding stays under the
+    limit; the executed approach to the stop is slow, the arm at rest at the end."""
     from thermo_ddp.tasks.limits import joint_range_rad
     from thermo_ddp.tasks.motion import MotionQuality
 
-    r = run(careful_motion=True)
+    r = nominal
+    assert r.settings.controller.careful_motion
     lp = planning_problem(r.settings, build_models(r.settings)[0])
-    names = {c.name for c in lp.problem.constraints}
-    assert {"one_way_next", "stop_approach_next", "winding_limit_next"} <= names and "one_way" not in names
+    names, costs = {c.name for c in lp.problem.constraints}, {c.name for c in lp.problem.costs}
+    assert {"winding_limit_next", "hold_band"} <= names and not names & {"one_way", "stop_approach", "winding_limit"}
+    assert {"one_way_penalty", "stop_approach_penalty", "winding_backoff"} <= costs
+    hard = planning_problem(r.settings.replace(motion_weight=0.0), build_models(r.settings)[0])
+    assert {"one_way_next", "stop_approach_next"} <= {c.name for c in hard.problem.constraints}
     assert_safe(r)
     assert r.step_status.count("fallback") <= 0.03 * len(r.step_status), r.message
     lo, hi = (b[0] for b in joint_range_rad(lp.model))

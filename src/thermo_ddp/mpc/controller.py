@@ -30,6 +30,7 @@ from .._config import require
 from ..model.actuated import ActuatedArm
 from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
+from ..solvers.kkt import constraint_rows
 from ..tasks.limits import default_limit_c
 from .settings import MPCSettings
 
@@ -54,7 +55,7 @@ class ControlStep:
 
 def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     """The lift OCP of the controller: ``horizon_knots`` knots at the control period, limit backed off,
-    careful motion only when ``settings.controller.careful_motion`` asks for it."""
+    careful motion unless ``settings.controller.careful_motion`` is off."""
     settings = settings.with_default_limit(default_limit_c(model.params[model.joints[0]]))
     base = LiftSettings(payload_kg=settings.scenario.payload_kg, limit_c=settings.planning_limit_c,
                         dt_s=settings.controller.control_period_s, integrator=settings.controller.integrator,
@@ -64,18 +65,21 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
-    problem = _limit_on_next_state(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2)
+    problem = limit_on_next_state(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
+                                  settings.controller.motion_weight)
     return dataclasses.replace(lp, problem=problem)
 
 
 # Stage constraints on the state alone, moved from x_k to x_{k+1} in the receding-horizon planner.
 ON_NEXT_STATE = ("winding_limit", "stop_approach", "one_way")
+SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
 
 
-def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float) -> OptimalControlProblem:
+def limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
+                        motion_weight: float = 0.0) -> OptimalControlProblem:
     """The lift OCP with the stage constraints of :data:`ON_NEXT_STATE` moved from x_k to
-    x_{k+1} = f(x_k, u_k, p_k) (renamed ``<name>_next``), and the winding's back-off made soft when
-    ``backoff_weight`` > 0.
+    x_{k+1} = f(x_k, u_k, p_k) (renamed ``<name>_next``), the winding's back-off made soft when
+    ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when ``motion_weight`` > 0.
 
     The set of constrained states is then x_1..x_N (x_N also by the terminal limit): the same as
     the lift's except the measured present state x_0, which no control can change. Without this,
@@ -88,11 +92,23 @@ def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backo
     the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
     predicted (the estimate inside the band) then gets the best plan that leaves the band soonest instead
     of an infeasible re-solve and the fallback's open-loop current.
+
+    Soft careful motion: each row costs ``0.5 * motion_weight * excess^2`` (rad/s) on x_k (a cost on x_0 is a
+    constant): the motion's quality gives way by what the weight allows; the thermal limit and the hold band stay
+    hard. Measured on the closed loop at 84 °C (+15 % resistance plant) with weights 1e4 / 10 / careful motion off:
+    speed near the stop 0.30 / 0.29 / 0.36 rad/s, final speed 8e-5 / 8e-5 / 2e-3 rad/s, peak acceleration 8.4 / 11.7
+    / 17.9 rad/s^2, 3 / 7 / 8 reversals. Hard rows or a weight of 100 and more: a plant that lags the plan (20 %
+    more payload) arrives late at the hold's knot at rest (|v| <= 0.01 rad/s there) and the re-solves fail (5 to 94
+    fallback periods, the hold cut to 0.3-0.6 s); at 10, 3 fallback periods and a 7.3 s hold (careful motion off:
+    2, 7.1 s).
     """
     x, u, p = (ca.SX.sym(n, problem.dynamics.size1_in(i)) for i, n in enumerate(problem.dynamics.name_in()))
     x_next = problem.dynamics(x, u, p)
     constraints, costs = [], list(problem.costs)
     for c in problem.constraints:
+        if c.name in SOFT_ROWS and motion_weight > 0:
+            costs.append(c.penalty(motion_weight, f"{c.name}_penalty"))
+            continue
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"
             c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
@@ -103,11 +119,40 @@ def _limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backo
     return dataclasses.replace(problem, costs=tuple(costs), constraints=tuple(constraints), name="lift_mpc")
 
 
+# The re-solves' stopping rule: |Qu|_inf <= 1e-5 and constraint rows within 1e-4 (K, rad, rad/s, V): a tenth of the
+# violation the controller accepts (ControllerSettings.feasibility_tolerance). Measured on bench_mpc_step's loop
+# (careful motion, 140 / 94 °C): the first current within 3.7e-5 / 7.6e-3 A of IPOPT's (tol 1e-8), costs within
+# 8e-12 / 1.4e-4 (relative); with careful motion's rows hard, 1.4 / 3.1 backward passes per re-solve against
+# 3.1 / 5.2 at 1e-6 / 1e-6.
+MPC_TOLERANCES = {"tolerance": 1e-5, "constraint_tolerance": 1e-4}
+
+
 def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
     """Full-second-order DDP (the R(T) i^2 curvature is in the dynamics), the solver's default schedule (not
     the lift's tuned one: its pivot jump made re-solves near infeasibility fail more often in the robustness
-    sweep), capped at ``max_iterations`` per period."""
-    return DDPSettings(full_second_order=True, max_iterations=max_iterations)
+    sweep), the stopping rule of :data:`MPC_TOLERANCES`, capped at ``max_iterations`` per period."""
+    return DDPSettings(full_second_order=True, max_iterations=max_iterations, **MPC_TOLERANCES)
+
+
+# Stage rows switched off at the measured present state x_0 by the window (the hold band: hold_flag 0).
+FREE_AT_PRESENT = ("hold_band",)
+
+
+def shifted_warm_start(result: SolverResult, problem: OptimalControlProblem, shift: int = 1,
+                       penalty_max: float = np.inf) -> WarmStart:
+    """``result`` shifted by ``shift`` knots (:meth:`WarmStart.from_result`) for the next window: the multipliers
+    of the rows of :data:`FREE_AT_PRESENT` at knot 0 are zero (inactive there: a multiplier carried from knot 1
+    would cost a multiplier update to clear), the AL penalty is capped at ``penalty_max`` (a penalty grown near
+    infeasibility would leave the next problems ill-conditioned)."""
+    warm = WarmStart.from_result(result, shift=shift)
+    multipliers = dict(warm.multipliers)
+    if multipliers.get("constraints") is not None:
+        lam = np.array(multipliers["constraints"], dtype=float)
+        lam[0, np.isin(constraint_rows(problem)[0], FREE_AT_PRESENT)] = 0.0
+        multipliers["constraints"] = lam
+    if "penalty" in multipliers:
+        multipliers["penalty"] = np.minimum(multipliers["penalty"], penalty_max)
+    return WarmStart(warm.xs, warm.us, multipliers)
 
 
 def mpc_solver(lp: LiftProblem, settings: MPCSettings):
@@ -247,14 +292,9 @@ class RecedingHorizonController:
                            cost=result.cost, events=tuple(events))
 
     def warm_start(self, shift: int = 1) -> WarmStart:
-        """The plan shifted by ``shift`` knots with its multipliers; the AL penalty is capped at
-        ``settings.controller.warm_penalty_max`` (a penalty grown near infeasibility would leave the next problems
-        ill-conditioned)."""
-        warm = WarmStart.from_result(self.plan, shift=min(shift, self.lp.problem.horizon))
-        multipliers = dict(warm.multipliers)
-        if "penalty" in multipliers:
-            multipliers["penalty"] = np.minimum(multipliers["penalty"], self.settings.controller.warm_penalty_max)
-        return WarmStart(warm.xs, warm.us, multipliers)
+        """The plan shifted by ``shift`` knots with its multipliers (:func:`shifted_warm_start`)."""
+        return shifted_warm_start(self.plan, self.lp.problem, min(shift, self.lp.problem.horizon),
+                                  self.settings.controller.warm_penalty_max)
 
     def _shorten(self) -> bool:
         """Move the start of the lowering earlier by ``hold_step_s`` (never into the past)."""

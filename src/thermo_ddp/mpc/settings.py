@@ -58,7 +58,8 @@ class ScenarioSettings:
 @checked_settings("MPCSettings controller", control_period_s="(0, inf)", horizon_knots="[2, inf)",
                   max_iterations="[1, inf)", feasibility_tolerance="(0, inf)", warm_penalty_max="(0, inf)",
                   hold_step_s="(0, inf)", max_retries="[0, inf)", uncertainty_sigmas="[0, inf)",
-                  sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)")
+                  sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)",
+                  motion_weight="[0, inf)")
 class ControllerSettings:
     """Receding-horizon DDP: a solve slower than ``max_solve_s`` is discarded (a real-time deadline); the
     winding is held hard under the task's limit and the scenario's ``backoff_c`` band beneath it costs
@@ -66,8 +67,8 @@ class ControllerSettings:
     planner plans from the estimate with every thermal node raised by ``uncertainty_sigmas`` standard
     deviations of the winding estimate, plus ``sensor_fault_backoff_c`` once the casing sensor is
     distrusted; ``derate`` caps the fallback current at the no-heating current near the limit;
-    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (off: the warm re-solves' figures
-    of benchmarks/mpc_step are without it)."""
+    ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (on, as the lift's); its rows cost
+    ``0.5 * motion_weight * excess_rad_s^2`` instead of binding (0: hard, from x_1 on)."""
 
     control_period_s: float = 0.1        # = the planner's knot spacing
     horizon_knots: int = 200
@@ -84,7 +85,8 @@ class ControllerSettings:
     derate: bool = True
     ambient_change_c: float = 1.0        # the planner's ambient follows the room beyond this change
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
-    careful_motion: bool = False         # one_way and stop_approach then bind from x_1 on (mpc.controller)
+    careful_motion: bool = True          # one_way and stop_approach in the planner (mpc.controller)
+    motion_weight: float = 10.0          # > 0: careful motion's rows soft, 0.5 * w * excess^2 (mpc.controller)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
