@@ -1,0 +1,160 @@
+"""The competing explanations of a thermal diagnosis that a designed experiment is to tell apart.
+
+From a :class:`~thermo_ddp.diagnose.thermal.ThermalDiagnosis`, each undetermined heat term (an item of
+``not_determinable``) becomes a *target* with its *rivals*: models that explain the recordings (fitted on
+them, or silent on them) but predict differently elsewhere.  The reference is the diagnosis's chosen fit.
+
+- a heat term the data could not test (no motion: ``friction_heating``, ``iron_losses``): the chosen fit
+  plus that term at the parameter file's start value (friction heat = the file's friction power);
+- a heat term the diagnosis could not settle (equivalent sets, parameters not identifiable, one speed):
+  the fitted term sets that toggle it, or trade it for the heat it is confused with
+  (:data:`CONFUSED`: a running loss against the drive's steady heat), all fitted by the diagnosis;
+- friction heat named at one speed: the same heat at the data's median moving speed as a purely linear
+  and a purely quadratic law in the speed.
+
+Other items (a casing node, the copper's temperature coefficient) need measurements a current and motion
+programme does not give (a winding thermometer, the motor voltage): they are listed as not targeted.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Mapping
+
+import numpy as np
+
+from ..diagnose._thermal_terms import MOVING_RAD_S, term_keys
+from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, ThermalModel, canonical_terms,
+                                default_fixed, network_model, start_values, structure_name)
+
+HEAT_TERMS = ("friction_heating", "drive_heating", "iron_losses")
+CONFUSED = {"friction_heating": ("drive_heating",), "drive_heating": ("friction_heating",),
+            "iron_losses": ("friction_heating",)}
+_HEAT_KEYS = FRICTION_KEYS + SENSOR_DRIVE_KEYS + (IRON_KEY,)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rival:
+    """One explanation: a term set and its values (parameter-file keys)."""
+
+    label: str
+    terms: tuple[str, ...]
+    values: Mapping[str, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """An undetermined item (``term``), why, and the rivals of the reference that would settle it."""
+
+    term: str
+    reason: str
+    rivals: tuple[Rival, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class Explanations:
+    """The reference (index 0 of :attr:`rivals`), the targets, the items not targeted (with why), and the
+    common structure every explanation is simulated in (:attr:`model`; :meth:`theta` gives its values)."""
+
+    reference: Rival
+    targets: tuple[Target, ...]
+    untargeted: tuple[dict, ...]
+    model: ThermalModel
+
+    @property
+    def rivals(self) -> tuple[Rival, ...]:
+        """The reference, then every distinct rival of the targets."""
+        out = [self.reference]
+        for t in self.targets:
+            out += [r for r in t.rivals if r.label not in {o.label for o in out}]
+        return tuple(out)
+
+    def index(self, rival: Rival) -> int:
+        return [r.label for r in self.rivals].index(rival.label)
+
+    def theta(self, rival: Rival) -> np.ndarray:
+        """The rival's values of the common structure's free keys; a heat it lacks is 0."""
+        fallback = start_values(self.model.params, self.model.terms)
+        out = []
+        for key in self.model.keys:
+            if key in rival.values:
+                out.append(rival.values[key])
+            elif key in _HEAT_KEYS:
+                out.append(0.0)
+            else:
+                out.append(self.reference.values.get(key, fallback[key]))
+        return np.array(out, float)
+
+
+def _rival(terms, values: Mapping[str, float], suffix: str = "") -> Rival:
+    ordered = canonical_terms("one_node", terms)
+    return Rival(structure_name(ordered) + suffix, ordered, {k: float(v) for k, v in values.items()})
+
+
+def _median_speed(diagnosis) -> float:
+    speeds = np.abs(np.concatenate([g.velocity for g in diagnosis.grids if g.has_velocity] or [np.zeros(0)]))
+    moving = speeds[speeds > MOVING_RAD_S]
+    return float(np.median(moving)) if moving.size else 0.0
+
+
+def _friction_laws(fit, speed: float) -> list[Rival]:
+    """The fitted friction heat at ``speed`` as a purely linear and a purely quadratic law."""
+    c1, c2 = (fit.parameters[k] for k in FRICTION_KEYS)
+    heat = c1 * speed + c2 * speed ** 2
+    if not speed > 0 or not heat > 0:
+        return []
+    base = dict(fit.parameters)
+    return [_rival(fit.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0}, " (linear in speed)"),
+            _rival(fit.terms, base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2},
+                   " (quadratic in speed)")]
+
+
+def _fitted_rivals(diagnosis, term: str) -> list[Rival]:
+    """Fitted sets that toggle ``term`` or trade it for a heat it is confused with (same nodes as chosen)."""
+    chosen, fits = diagnosis.final_terms, diagnosis.fits
+    sets = [chosen ^ {term}] + [(chosen - {term}) | {p} for p in CONFUSED[term]] + [chosen | {term, p} for p in CONFUSED[term]]
+    out = []
+    for terms in dict.fromkeys(s for s in sets if s != chosen):
+        fit = fits.get(terms)
+        if fit is not None and fit.success and network_model(terms) == network_model(chosen):
+            out.append(_rival(fit.terms, fit.parameters))
+    return out
+
+
+def _target(diagnosis, item: dict, reference: Rival) -> Target | None:
+    term, chosen = item["term"], diagnosis.final_terms
+    if term not in HEAT_TERMS:
+        return None
+    if term not in diagnosis.fits.get(chosen | {term}, diagnosis.final_fit).terms:  # never fitted: no motion
+        start = start_values(diagnosis.params, canonical_terms("one_node", chosen | {term}))
+        rivals = [_rival(chosen | {term}, dict(reference.values) | {k: start[k] for k in term_keys(term, ())})]
+    else:
+        rivals = _fitted_rivals(diagnosis, term)
+        if term == "friction_heating" and term in chosen:
+            rivals += _friction_laws(diagnosis.final_fit, _median_speed(diagnosis))
+    return Target(term, item["reason"], tuple(rivals)) if rivals else None
+
+
+def explanations(diagnosis) -> Explanations:
+    """The reference, targets and untargeted items of a one-sensor thermal diagnosis (module docstring)."""
+    fit = diagnosis.final_fit
+    reference = _rival(fit.terms, fit.parameters)
+    targets, untargeted, seen = [], [], set()
+    for item in diagnosis.not_determinable:
+        if item["term"] in seen:
+            continue
+        seen.add(item["term"])
+        target = _target(diagnosis, item, reference)
+        if target is None:
+            untargeted.append({"term": item["term"], "reason": "a current and motion programme cannot settle it "
+                                                             f"(needs: {item['experiment']})"})
+        else:
+            targets.append(target)
+    union = set(reference.terms).union(*(r.terms for t in targets for r in t.rivals))
+    model = _common_model(diagnosis.params, union)
+    return Explanations(reference, tuple(targets), tuple(untargeted), model)
+
+
+def _common_model(params, terms) -> ThermalModel:
+    ordered = canonical_terms("one_node", terms)
+    values = start_values(params, ordered)
+    return ThermalModel(params, ordered, {k: values[k] for k in default_fixed(ordered)})
