@@ -37,12 +37,14 @@ from ..diagnose.thermal import ThermalDiagnosis, diagnose_thermal
 from ..identify.thermal import load_joint_parameters
 from ..identify.thermal_data import INPUT_ROWS, _drivers
 from ..model import motor
+from ..model.actuated import ActuatedArm
+from ..model.arm import ArmSettings
 from ..multi_model import MultiModelProblem
 from ..ocp import Constraint, Cost, KnotParameters
 from ..solvers import DDPSettings, DDPSolver, WarmStart
 from .experiment_rivals import Explanations, explanations
 from .experiment_motion import PROGRAMME_COLUMNS, joint_bounds, plot_experiment, programme
-from .limits import joint_limit_c
+from .limits import check_idle_below_limits, joint_limit_c
 
 log = logging.getLogger(__name__)
 
@@ -86,11 +88,17 @@ def _winding_expr(model, params, x, u):
     return x[model.sensor] + rise * motor.joule_w(params.motor, u[0], x[model.sensor])
 
 
-def _functions(model, params, dt_s: float, pairs: int):
+def _pairs(explanations: int) -> list[tuple[int, int]]:
+    """Every pair of explanations (i < j): each is to be told from every other."""
+    return [(i, j) for i in range(explanations) for j in range(i + 1, explanations)]
+
+
+def _functions(model, params, dt_s: float, explanations: int):
     """(step(x, u, p, theta), winding(x, u), divergence(X, p), limits(x, u, p)) of the explanations' structure;
     p = [ambient_c, limit_c, then per pair its sign over its target D_j]."""
     n, q = len(model.nodes), len(model.keys)
     x, u, th = ca.SX.sym("x", n), ca.SX.sym("u", 2), ca.SX.sym("theta", q)
+    pairs = len(_pairs(explanations))
     p = ca.SX.sym("p", 2 + pairs)
     drivers = _drivers(params)(u[0], u[1])
     h = dt_s / SUBSTEPS
@@ -106,9 +114,9 @@ def _functions(model, params, dt_s: float, pairs: int):
     g = ca.vertcat(w - p[1], motor.resistance_ohm(m, w) * u[0] + m.back_emf_v_s_per_rad * m.gear_ratio * u[1]
                    - m.bus_voltage_v)
     limits = ca.Function("limits", [x, u, p], [g], ["x", "u", "p"], ["g"])
-    X = ca.SX.sym("X", n, pairs + 1)
+    X = ca.SX.sym("X", n, explanations)
     y = X[model.sensor, :]
-    r = ca.vertcat(*[1 - p[2 + j] * (y[0] - y[j + 1]) for j in range(pairs)])
+    r = ca.vertcat(*[1 - p[2 + k] * (y[i] - y[j]) for k, (i, j) in enumerate(_pairs(explanations))])
     divergence = ca.Function("divergence", [X, p], [r], ["X", "p"], ["r"])
     return step, winding, divergence, limits
 
@@ -130,7 +138,7 @@ class _Design:
 
     @property
     def pairs(self) -> int:
-        return self.thetas.shape[0] - 1
+        return len(_pairs(self.thetas.shape[0]))
 
     def params(self, scales) -> np.ndarray:
         """Per-knot parameters with each pair's sign over its target (``scales``)."""
@@ -156,9 +164,9 @@ class _Design:
         return np.array([[float(self.winding(s, uk)) for s in st] for st, uk in zip(states, u)])
 
     def divergences(self, xs) -> np.ndarray:
-        """(N+1, K-1) the reference's sensor minus each rival's, in K."""
+        """(N+1, pairs) the difference of the sensor predictions of every pair of explanations, in K."""
         y = self.sensors(xs)
-        return y[:, :1] - y[:, 1:]
+        return np.column_stack([y[:, i] - y[:, j] for i, j in _pairs(y.shape[1])])
 
 
 def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float, u_max, settings) -> _Design:
@@ -166,12 +174,12 @@ def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float,
     knots = max(1, int(math.ceil(settings.duration_s / settings.dt_s - 1e-9)))
     dt_s = settings.duration_s / knots
     thetas = np.array([expl.theta(r) for r in expl.rivals])
-    pairs = thetas.shape[0] - 1
-    step, winding, divergence, limits = _functions(model, params, dt_s, pairs)
+    pairs = len(_pairs(thetas.shape[0]))
+    step, winding, divergence, limits = _functions(model, params, dt_s, thetas.shape[0])
     u = ca.SX.sym("u", 2)
     effort = Cost("effort", 1e-6, ca.Function("r", [u], [u / ca.DM(u_max)], ["u"], ["r"]))
     mm = MultiModelProblem(step, knots, thetas.shape[0], costs=[effort],
-                           cross_costs=[Cost("divergence", 1.0 / (knots * pairs), _cross(divergence, len(model.nodes), pairs))],
+                           cross_costs=[Cost("divergence", 1.0 / (knots * pairs), _cross(divergence, len(model.nodes), thetas.shape[0]))],
                            constraints=[Constraint("winding_and_bus", limits)], u_lb=[0.0, 0.0], u_ub=list(u_max),
                            parameters=KnotParameters((("ambient_limit", 2), ("pair_scales", pairs))),
                            name="designed_experiment")
@@ -180,8 +188,8 @@ def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float,
     return _Design(expl, mm, thetas, x0, winding, sigma_c, limit_c, ambient_c, np.asarray(u_max, float), dt_s)
 
 
-def _cross(divergence: ca.Function, n: int, pairs: int) -> ca.Function:
-    X, p = ca.SX.sym("X", n, pairs + 1), ca.SX.sym("p", 2 + pairs)
+def _cross(divergence: ca.Function, n: int, explanations: int) -> ca.Function:
+    X, p = ca.SX.sym("X", n, explanations), ca.SX.sym("p", 2 + len(_pairs(explanations)))
     return ca.Function("r", [X, p], [divergence(X, p)], ["X", "p"], ["r"])
 
 
@@ -227,7 +235,7 @@ class _Solved:
     converged: bool
     us: np.ndarray
     xs: np.ndarray   # the explanations' states simulated along ``us`` (not the solver's)
-    score: float     # the weakest pair's RMS divergence over the sensor noise (-inf: violates a limit)
+    score: float     # mean over the pairs of log(RMS divergence / sensor noise) (-inf: violates a limit)
     message: str
 
 
@@ -242,7 +250,8 @@ def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSe
     if not np.all(np.isfinite(xs)) or _over(design, xs, us) > FEASIBILITY_K:
         return _Solved(family, result.success, us, xs, -math.inf, f"{family}: {result.message}; exceeds a limit")
     rms = np.sqrt(np.mean(design.divergences(xs) ** 2, axis=0))
-    return _Solved(family, result.success, us, xs, float(rms.min() / design.sigma_c), f"{family}: {result.message}")
+    score = float(np.mean(np.log(np.maximum(rms / design.sigma_c, 1e-12))))
+    return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}")
 
 
 def _over(design: _Design, xs, us) -> float:
@@ -330,10 +339,12 @@ def _ambient(diagnosis: ThermalDiagnosis) -> float:
 
 
 def _separations(design: _Design, xs) -> dict[str, float]:
-    """Per target: the RMS sensor difference between the reference and its weakest rival [K]."""
+    """Per target: the RMS sensor difference of its least separated pair of explanations (pairs holding one of its
+    rivals) [K]."""
     rms = np.sqrt(np.mean(design.divergences(xs) ** 2, axis=0))
-    expl = design.expl
-    return {t.term: float(min(rms[expl.index(r) - 1] for r in t.rivals)) for t in expl.targets}
+    expl, pairs = design.expl, _pairs(design.thetas.shape[0])
+    return {t.term: float(min(rms[k] for k, (i, j) in enumerate(pairs) if {i, j} & {expl.index(r) for r in t.rivals}))
+            for t in expl.targets}
 
 
 def _not_designed(status: str, message: str, settings, limit_c, **fields) -> ExperimentDesign:
@@ -372,21 +383,46 @@ def _rest(expl: Explanations, ambient_c: float):
     return rest, expl.theta(expl.reference)
 
 
-def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
-    lo, hi, vmax = joint_bounds(params, settings.margin_rad)
-    u_max = np.array([params.motor.current_peak_a, vmax])
-    design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
-    tic = time.perf_counter()
-    starts = {f: _scaled(design, _family(f, design.mm.horizon, u_max)) for f in FAMILIES}
+def _starts(design: _Design) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The starts within the limits, and each pair's largest divergence over them (K)."""
+    starts = {f: _scaled(design, _family(f, design.mm.horizon, design.u_max)) for f in FAMILIES}
     starts = {f: us for f, us in starts.items() if us is not None}
     reach = np.max([np.abs(design.divergences(design.rollout(us))).max(axis=0) for us in starts.values()]
                    or [np.zeros(design.pairs)], axis=0)
+    return starts, reach
+
+
+def _distinct(count: int, reach: np.ndarray, sigma_c: float) -> list[int]:
+    """The explanations kept: a later one that no start moves a sensor-noise apart from a kept one is the same
+    explanation for this experiment (e.g. a rival whose fitted extra heat is nil)."""
+    keep = []
+    for k in range(count):
+        if all(reach[_pairs(count).index((i, k))] >= sigma_c for i in keep):
+            keep.append(k)
+    return keep
+
+
+def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
+    lo, hi, vmax = joint_bounds(params, settings.margin_rad)
+    u_max = np.array([params.motor.current_peak_a, vmax])
+    tic = time.perf_counter()
+    design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
+    starts, reach = _starts(design)
+    keep = _distinct(design.thetas.shape[0], reach, design.sigma_c)
+    if len(keep) < design.thetas.shape[0]:
+        expl = expl.subset(keep)
+        if not expl.targets:
+            return _not_designed("not_designable", "no current and motion programme within the limits moves the "
+                                 "explanations' predictions a sensor noise apart", settings, limit_c,
+                                 untargeted=expl.untargeted)
+        design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
+        starts, reach = _starts(design)
     targets = TARGET_FACTOR * np.maximum(reach, design.sigma_c)
     solved = [_solve(design, f, us, settings, targets)
               for f, us in tqdm(starts.items(), desc="design-experiment starts", disable=_hide(settings))]
     best = max(solved, key=lambda s: s.score, default=None)
     common = dict(untargeted=expl.untargeted, labels=tuple(r.label for r in expl.rivals),
-                  targets=tuple(t.term for t in expl.targets), starts={s.family: s.score for s in solved},
+                  targets=tuple(t.term for t in expl.targets), starts={s.family: s.score if math.isfinite(s.score) else None for s in solved},
                   solve_s=time.perf_counter() - tic)
     if best is None or not math.isfinite(best.score):
         reasons = "; ".join(s.message for s in solved) or "no start stays under the limit"
@@ -401,8 +437,25 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
                             winding_c=design.windings(best.xs, best.us), bounds_rad=(lo, hi), **common)
 
 
+def check_request(parameters, settings: ExperimentSettings):
+    """The parameter file and the limit, checked before any work (InputError): a limit above the winding's rating,
+    not above the room, or not above the winding's temperature at rest (the file's drive idle heat)."""
+    params = load_joint_parameters(parameters)
+    limit_c = joint_limit_c(params, settings.limit_c)
+    arm = ActuatedArm.from_parameters(ArmSettings(joints=(params.joint,)), {params.joint: params})
+    check_idle_below_limits(arm, {params.joint: limit_c})
+    return params
+
+
+def write_programme(rows: dict[str, np.ndarray], path) -> None:
+    """The programme as a recording-format CSV (header row, :data:`PROGRAMME_COLUMNS`)."""
+    table = np.column_stack([rows[c] for c in PROGRAMME_COLUMNS])
+    np.savetxt(path, table, delimiter=",", header=",".join(PROGRAMME_COLUMNS), comments="", fmt="%.6g")
+
+
 def _hide(settings: ExperimentSettings) -> bool | None:
     return None if settings.progress is None else not settings.progress
 
 
-__all__ = ["ExperimentDesign", "ExperimentSettings", "FAMILIES", "PROGRAMME_COLUMNS", "design_experiment"]
+__all__ = ["ExperimentDesign", "ExperimentSettings", "FAMILIES", "PROGRAMME_COLUMNS", "check_request",
+           "design_experiment", "write_programme"]

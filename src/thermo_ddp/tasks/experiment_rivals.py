@@ -29,6 +29,10 @@ from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, Ther
 HEAT_TERMS = ("friction_heating", "drive_heating", "iron_losses")
 CONFUSED = {"friction_heating": ("drive_heating",), "drive_heating": ("friction_heating",),
             "iron_losses": ("friction_heating",)}
+# A fitted set whose RMSE exceeds the chosen one's by this factor is rejected by the recordings already (the misfit of a
+# missing heat source is tens of noise levels, a tie is within a few per cent): not a rival.
+RIVAL_RMSE_FACTOR = 1.5
+UNSEEN_SPEED_RAD_S = 1.0   # where a friction heat never seen is split into its two laws (a typical joint speed)
 _HEAT_KEYS = FRICTION_KEYS + SENSOR_DRIVE_KEYS + (IRON_KEY,)
 
 
@@ -68,6 +72,20 @@ class Explanations:
             out += [r for r in t.rivals if r.label not in {o.label for o in out}]
         return tuple(out)
 
+    def subset(self, keep) -> "Explanations":
+        """Only the explanations at the indices ``keep`` (of :attr:`rivals`; 0, the reference, always kept); a
+        target left without rivals is not targeted."""
+        kept = {self.rivals[k].label for k in keep}
+        targets, untargeted = [], list(self.untargeted)
+        for t in self.targets:
+            rivals = tuple(r for r in t.rivals if r.label in kept)
+            if rivals:
+                targets.append(dataclasses.replace(t, rivals=rivals))
+            else:
+                untargeted.append({"term": t.term, "reason": "its rivals predict what the reference predicts under "
+                                                             "any programme within the limits"})
+        return dataclasses.replace(self, targets=tuple(targets), untargeted=tuple(untargeted))
+
     def index(self, rival: Rival) -> int:
         return [r.label for r in self.rivals].index(rival.label)
 
@@ -96,26 +114,28 @@ def _median_speed(diagnosis) -> float:
     return float(np.median(moving)) if moving.size else 0.0
 
 
-def _friction_laws(fit, speed: float) -> list[Rival]:
-    """The fitted friction heat at ``speed`` as a purely linear and a purely quadratic law."""
-    c1, c2 = (fit.parameters[k] for k in FRICTION_KEYS)
+def _friction_laws(rival: Rival, speed: float) -> list[Rival]:
+    """A rival's friction heat at ``speed`` as a purely linear and a purely quadratic law."""
+    c1, c2 = (rival.values[k] for k in FRICTION_KEYS)
     heat = c1 * speed + c2 * speed ** 2
-    if not speed > 0 or not heat > 0:
+    if not heat > 0:
         return []
-    base = dict(fit.parameters)
-    return [_rival(fit.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0}, " (linear in speed)"),
-            _rival(fit.terms, base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2},
-                   " (quadratic in speed)")]
+    base, name = dict(rival.values), rival.label
+    return [Rival(f"{name} (linear in speed)", rival.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0}),
+            Rival(f"{name} (quadratic in speed)", rival.terms,
+                  base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2})]
 
 
 def _fitted_rivals(diagnosis, term: str) -> list[Rival]:
-    """Fitted sets that toggle ``term`` or trade it for a heat it is confused with (same nodes as chosen)."""
+    """Fitted sets that toggle ``term`` or trade it for a heat it is confused with (same nodes as chosen) and
+    that the recordings do not reject (RMSE within :data:`RIVAL_RMSE_FACTOR` of the chosen fit's)."""
     chosen, fits = diagnosis.final_terms, diagnosis.fits
     sets = [chosen ^ {term}] + [(chosen - {term}) | {p} for p in CONFUSED[term]] + [chosen | {term, p} for p in CONFUSED[term]]
     out = []
     for terms in dict.fromkeys(s for s in sets if s != chosen):
         fit = fits.get(terms)
-        if fit is not None and fit.success and network_model(terms) == network_model(chosen):
+        if (fit is not None and fit.success and network_model(terms) == network_model(chosen)
+                and fit.rmse <= RIVAL_RMSE_FACTOR * diagnosis.final_fit.rmse):
             out.append(_rival(fit.terms, fit.parameters))
     return out
 
@@ -129,8 +149,9 @@ def _target(diagnosis, item: dict, reference: Rival) -> Target | None:
         rivals = [_rival(chosen | {term}, dict(reference.values) | {k: start[k] for k in term_keys(term, ())})]
     else:
         rivals = _fitted_rivals(diagnosis, term)
-        if term == "friction_heating" and term in chosen:
-            rivals += _friction_laws(diagnosis.final_fit, _median_speed(diagnosis))
+    # every explanation with friction heat also as its two laws at the data's speed: only two speeds tell them apart
+    speed = _median_speed(diagnosis) or UNSEEN_SPEED_RAD_S
+    rivals += [law for r in [reference, *rivals] if "friction_heating" in r.terms for law in _friction_laws(r, speed)]
     return Target(term, item["reason"], tuple(rivals)) if rivals else None
 
 
