@@ -33,7 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .._config import checked_settings, require
-from ..diagnose.thermal import ThermalDiagnosis, diagnose_thermal
+from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import load_joint_parameters
 from ..identify.thermal_data import INPUT_ROWS, _drivers
 from ..model import motor
@@ -55,7 +55,7 @@ TARGET_FACTOR = 5.0         # each pair's divergence target D_j: this many times
 TOLERANCE = 1e-4            # DDP stationarity |Qu|: the criterion is O(1), the controls O(1-10)
 LIMIT_MARGIN_K = 2.0        # the starts are scaled to stay this far under the limit
 FEASIBILITY_K = 0.05        # a design's simulated winding may exceed the limit by this much at most (K, and V on the bus)
-FAMILIES = ("current_steps", "two_speeds", "move_then_hold", "hold_then_move")
+FAMILIES = ("current_steps", "two_speeds", "speeds_then_holds", "move_then_hold", "hold_then_move")
 _SRC = "design_experiment"
 
 
@@ -202,6 +202,9 @@ def _family(name: str, knots: int, u_max: np.ndarray) -> np.ndarray:
         i, v = np.where((k < 0.25) | ((k >= 0.5) & (k < 0.75)), 1.0, 0.0), np.zeros(knots)
     elif name == "two_speeds":
         v = np.select([k < 1 / 3, k < 2 / 3], [0.3, 0.8], 0.0)
+    elif name == "speeds_then_holds":  # each heat alone: friction at two speeds, then copper, then the idle heat
+        i = np.select([k < 0.5, k < 0.75], [0.0, 1.0], 0.0)
+        v = np.select([k < 0.25, k < 0.5], [0.9, 0.4], 0.0)
     elif name == "move_then_hold":
         v = np.where(k < 0.5, 0.8, 0.0)
     else:  # hold_then_move
@@ -268,9 +271,10 @@ def _over(design: _Design, xs, us) -> float:
 class ExperimentDesign:
     """Result of :func:`design_experiment`: the contract's experiment JSON (:meth:`to_dict`), the knots'
     current and speed, each explanation's predicted sensor temperature and winding, and the programme
-    (:meth:`programme`) the robot runs.  ``status``: ``designed``, ``nothing_undetermined`` (success, no
-    experiment), ``not_designable`` (the undetermined items need other measurements, or the diagnosis did not
-    succeed) or ``failed`` (no start reached a converged design)."""
+    (:meth:`programme`) the robot runs.  ``status``: ``designed``; ``nothing_undetermined`` and ``not_designable``
+    (success, no experiment: nothing to settle, or only what needs other measurements than current and motion, or
+    explanations no programme within the limits separates); ``diagnosis_failed``, ``unsupported`` (several
+    sensors) and ``failed`` (no start gave a design within the limits): success false."""
 
     success: bool
     status: str
@@ -348,7 +352,8 @@ def _separations(design: _Design, xs) -> dict[str, float]:
 
 
 def _not_designed(status: str, message: str, settings, limit_c, **fields) -> ExperimentDesign:
-    return ExperimentDesign(status == "nothing_undetermined", status, message, settings, limit_c, **fields)
+    return ExperimentDesign(status in ("nothing_undetermined", "not_designable"), status, message, settings, limit_c,
+                            **fields)
 
 
 def design_experiment(recordings, parameters=None, settings: ExperimentSettings | None = None,
@@ -359,11 +364,14 @@ def design_experiment(recordings, parameters=None, settings: ExperimentSettings 
     settings = settings or ExperimentSettings()
     params = load_joint_parameters(parameters)
     limit_c = joint_limit_c(params, settings.limit_c)
-    diagnosis = diagnosis or diagnose_thermal(recordings, parameters=params, settings=None)
-    if not isinstance(diagnosis, ThermalDiagnosis) or not diagnosis.success:
-        why = "recordings with several sensors (a network diagnosis)" if not isinstance(diagnosis, ThermalDiagnosis) \
-            else f"the diagnosis did not succeed ({diagnosis.status}: {diagnosis.message})"
-        return _not_designed("not_designable", f"no experiment designed: {why}", settings, limit_c)
+    diagnosis = diagnosis or diagnose_thermal(recordings, parameters=params,
+                                              settings=ThermalDiagnosisSettings(progress=settings.progress))
+    if not isinstance(diagnosis, ThermalDiagnosis):
+        return _not_designed("unsupported", "no experiment designed: recordings with several sensors (a network "
+                             "diagnosis) are not supported yet", settings, limit_c)
+    if not diagnosis.success:
+        return _not_designed("diagnosis_failed", f"no experiment designed: the diagnosis did not succeed "
+                             f"({diagnosis.status}: {diagnosis.message})", settings, limit_c)
     if not diagnosis.not_determinable:
         return _not_designed("nothing_undetermined", "the recordings leave nothing undetermined: no experiment needed",
                              settings, limit_c)

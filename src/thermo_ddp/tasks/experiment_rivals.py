@@ -8,9 +8,13 @@ them, or silent on them) but predict differently elsewhere.  The reference is th
   plus that term at the parameter file's start value (friction heat = the file's friction power);
 - a heat term the diagnosis could not settle (equivalent sets, parameters not identifiable, one speed):
   the fitted term sets that toggle it, or trade it for the heat it is confused with
-  (:data:`CONFUSED`: a running loss against the drive's steady heat), all fitted by the diagnosis;
-- friction heat named at one speed: the same heat at the data's median moving speed as a purely linear
-  and a purely quadratic law in the speed.
+  (:data:`CONFUSED`: a running loss against the drive's steady heat), all fitted by the diagnosis, that the
+  recordings do not reject (:data:`RIVAL_RMSE_FACTOR`);
+- every explanation with friction heat also as a purely linear and a purely quadratic law in the speed, equal
+  at the data's median moving speed;
+- the richest explanation (the most heat terms) with each value of a target term raised by
+  :data:`PERTURBATION`: separating it from the explanation is measuring that value to the diagnosis's
+  precision (a finite-difference sensitivity: the design then also excites what each value does).
 
 Other items (a casing node, the copper's temperature coefficient) need measurements a current and motion
 programme does not give (a winding thermometer, the motor voltage): they are listed as not targeted.
@@ -32,6 +36,7 @@ CONFUSED = {"friction_heating": ("drive_heating",), "drive_heating": ("friction_
 # A fitted set whose RMSE exceeds the chosen one's by this factor is rejected by the recordings already (the misfit of a
 # missing heat source is tens of noise levels, a tie is within a few per cent): not a rival.
 RIVAL_RMSE_FACTOR = 1.5
+PERTURBATION = 0.5         # a named parameter is identifiable within +-50 % (the diagnosis's rule)
 UNSEEN_SPEED_RAD_S = 1.0   # where a friction heat never seen is split into its two laws (a typical joint speed)
 _HEAT_KEYS = FRICTION_KEYS + SENSOR_DRIVE_KEYS + (IRON_KEY,)
 
@@ -155,6 +160,15 @@ def _target(diagnosis, item: dict, reference: Rival) -> Target | None:
     return Target(term, item["reason"], tuple(rivals)) if rivals else None
 
 
+def _perturbed(target: Target, richest: Rival) -> Target:
+    """``target`` with the richest explanation's values of its term each raised by :data:`PERTURBATION`: telling
+    them apart is seeing that value to the precision the diagnosis asks of a named parameter."""
+    keys = [k for k in term_keys(target.term, richest.terms) if richest.values.get(k, 0.0) > 0]
+    extra = tuple(Rival(f"{richest.label} ({k} +{100 * PERTURBATION:.0f} %)", richest.terms,
+                        dict(richest.values) | {k: richest.values[k] * (1 + PERTURBATION)}) for k in keys)
+    return dataclasses.replace(target, rivals=target.rivals + extra)
+
+
 def explanations(diagnosis) -> Explanations:
     """The reference, targets and untargeted items of a one-sensor thermal diagnosis (module docstring)."""
     fit = diagnosis.final_fit
@@ -170,6 +184,8 @@ def explanations(diagnosis) -> Explanations:
                                                              f"(needs: {item['experiment']})"})
         else:
             targets.append(target)
+    richest = max([reference, *(r for t in targets for r in t.rivals)], key=lambda r: len(set(r.terms) & set(HEAT_TERMS)))
+    targets = [_perturbed(t, richest) if t.term in richest.terms else t for t in targets]
     union = set(reference.terms).union(*(r.terms for t in targets for r in t.rivals))
     model = _common_model(diagnosis.params, union)
     return Explanations(reference, tuple(targets), tuple(untargeted), model)
