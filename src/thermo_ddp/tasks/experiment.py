@@ -16,7 +16,12 @@
    file's winding-casing resistance times the copper loss), the bus voltage R(T) i + K_b N |v| <= V_bus; the
    current within the file's peak and the speed within the joint's limit (boxes).
 5. The criterion is not convex: the DDP starts from simple excitation families (:data:`FAMILIES`), each scaled
-   to keep every explanation under the limit, and the best converged design is kept.
+   to keep every explanation under the limit.  Of the designs within the limits, the one kept is D_s-optimal
+   for the target values: the largest log det of their Fisher information (relative to their values) from the
+   passive recordings and the design together, the richest explanation's sensor sensitivities over the noise,
+   its other values and every segment's initial offset nuisances.  Discrimination plans, information chooses:
+   telling the explanations apart does not by itself pin each value down (two speeds for a linear and a
+   quadratic friction heat), and the passive recordings already hold part of the information.
 6. The programme (``time_s``, ``current_a``, ``position``, ``velocity``) moves the joint back and forth inside
    its range at each knot's speed with a bounded acceleration (careful motion: reversals and the final stop
    at ``acceleration_rad_s2``), the current held per knot.
@@ -35,7 +40,7 @@ from tqdm import tqdm
 from .._config import checked_settings, require
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import load_joint_parameters
-from ..identify.thermal_data import INPUT_ROWS, _drivers
+from ..identify.thermal_data import INPUT_ROWS, ThermalGrid, _drivers
 from ..model import motor
 from ..model.actuated import ActuatedArm
 from ..model.arm import ArmSettings
@@ -54,6 +59,7 @@ SUBSTEPS = 3                # thermal sub-steps per knot (the diagnosis integrat
 TARGET_FACTOR = 5.0         # each pair's divergence target D_j: this many times its largest on any start
 TOLERANCE = 1e-4            # DDP stationarity |Qu|: the criterion is O(1), the controls O(1-10)
 LIMIT_MARGIN_K = 2.0        # the starts are scaled to stay this far under the limit
+GRID_S = 10.0               # the diagnosis's grid step: the weight of one sample of information
 FEASIBILITY_K = 0.05        # a design's simulated winding may exceed the limit by this much at most (K, and V on the bus)
 FAMILIES = ("current_steps", "two_speeds", "speeds_then_holds", "move_then_hold", "hold_then_move")
 _SRC = "design_experiment"
@@ -232,6 +238,49 @@ def _scaled(design: _Design, shape: np.ndarray) -> np.ndarray | None:
     return us if lo > 0 else None
 
 
+# ----------------------------------------------------------------------------- information (choice among starts)
+def _knot_grid(design: _Design, us: np.ndarray) -> ThermalGrid:
+    """The design's knots as a diagnosis grid, after an instant at rest (its start: the state at rest)."""
+    params, n = design.expl.model.params, us.shape[0]
+    drivers = np.array(_drivers(params)(np.r_[0.0, us[:, 0]][None, :], np.r_[0.0, us[:, 1]][None, :]))
+    steps = np.r_[1e-6, np.full(n, design.dt_s / SUBSTEPS)]
+    cols = np.vstack([steps, drivers[:3], np.full(n + 1, design.ambient_c), drivers[3:]])
+    inputs = np.hstack([cols[:, :1], np.repeat(cols[:, 1:], SUBSTEPS, axis=1)])
+    time_s = np.arange(n + 1) * design.dt_s
+    return ThermalGrid("design", time_s, np.zeros(n + 1), np.r_[us[:, 0], 0.0], np.r_[us[:, 1], 0.0], inputs,
+                       np.arange(1, n + 1) * SUBSTEPS, True, True)
+
+
+def _sensitivities(design: _Design, grid: ThermalGrid, weight: float) -> np.ndarray:
+    """Weighted sensor sensitivities (samples x (parameters + offset)) of the richest explanation on ``grid``,
+    each parameter scaled by its value (relative), over the sensor noise."""
+    model, theta = design.expl.model, design.expl.theta(design.expl.richest)
+    _, _, sens, _ = model.simulate(grid, theta, 0.0)
+    scale = np.r_[np.where(theta > 0, theta, 1.0), 1.0]
+    return np.sqrt(weight) * sens * scale / design.sigma_c
+
+
+def _information(blocks: list[np.ndarray], wanted: np.ndarray) -> np.ndarray:
+    """The Fisher information of the ``wanted`` parameters (a mask) from every segment's sensitivities, the other
+    parameters and each segment's initial offset nuisances (Schur complement: D_s-optimality)."""
+    q = blocks[0].shape[1] - 1
+    j = np.zeros((sum(b.shape[0] for b in blocks), q + len(blocks)))
+    row = 0
+    for k, b in enumerate(blocks):
+        j[row:row + b.shape[0], :q], j[row:row + b.shape[0], q + k] = b[:, :q], b[:, q]
+        row += b.shape[0]
+    keep = np.r_[wanted, np.zeros(len(blocks), bool)]
+    m = j.T @ j
+    a, b, c = m[np.ix_(keep, keep)], m[np.ix_(keep, ~keep)], m[np.ix_(~keep, ~keep)]
+    return a - b @ np.linalg.pinv(c) @ b.T
+
+
+def _log_det(information: np.ndarray) -> float:
+    """D-criterion: log det of the relative information (a floor keeps an unidentifiable direction finite)."""
+    eig = np.linalg.eigvalsh(0.5 * (information + information.T))
+    return float(np.sum(np.log(np.maximum(eig, 1e-9))))
+
+
 @dataclasses.dataclass(frozen=True)
 class _Solved:
     family: str
@@ -240,9 +289,11 @@ class _Solved:
     xs: np.ndarray   # the explanations' states simulated along ``us`` (not the solver's)
     score: float     # mean over the pairs of log(RMS divergence / sensor noise) (-inf: violates a limit)
     message: str
+    information: float = -math.inf   # D-criterion with the passive recordings (what picks the design)
 
 
-def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSettings, targets) -> _Solved:
+def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSettings, targets,
+           passive: list[np.ndarray]) -> _Solved:
     """The DDP from the start ``us0``; each pair's divergence keeps the sign it has on the start."""
     d0 = design.divergences(design.rollout(us0))
     signs = np.where(d0.mean(axis=0) >= 0, 1.0, -1.0)
@@ -254,7 +305,9 @@ def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSe
         return _Solved(family, result.success, us, xs, -math.inf, f"{family}: {result.message}; exceeds a limit")
     rms = np.sqrt(np.mean(design.divergences(xs) ** 2, axis=0))
     score = float(np.mean(np.log(np.maximum(rms / design.sigma_c, 1e-12))))
-    return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}")
+    blocks = passive + [_sensitivities(design, _knot_grid(design, us), design.dt_s / GRID_S)]
+    info = _log_det(_information(blocks, design.expl.target_keys()))
+    return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}", info)
 
 
 def _over(design: _Design, xs, us) -> float:
@@ -426,13 +479,15 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
         design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
         starts, reach = _starts(design)
     targets = TARGET_FACTOR * np.maximum(reach, design.sigma_c)
-    solved = [_solve(design, f, us, settings, targets)
+    passive = [_sensitivities(design, g, float(np.median(np.diff(g.time_s))) / GRID_S) for g in diagnosis.grids]
+    solved = [_solve(design, f, us, settings, targets, passive)
               for f, us in tqdm(starts.items(), desc="design-experiment starts", disable=_hide(settings))]
-    best = max(solved, key=lambda s: s.score, default=None)
+    best = max((s for s in solved if math.isfinite(s.score)), key=lambda s: s.information, default=None)
     common = dict(untargeted=expl.untargeted, labels=tuple(r.label for r in expl.rivals),
-                  targets=tuple(t.term for t in expl.targets), starts={s.family: s.score if math.isfinite(s.score) else None for s in solved},
+                  targets=tuple(t.term for t in expl.targets), starts={s.family: {"divergence": s.score, "information": s.information} if math.isfinite(s.score) else None
+                          for s in solved},
                   solve_s=time.perf_counter() - tic)
-    if best is None or not math.isfinite(best.score):
+    if best is None:
         reasons = "; ".join(s.message for s in solved) or "no start stays under the limit"
         return _not_designed("failed", f"no design within the limits ({reasons})", settings, limit_c, **common)
     optimum = "converged" if best.converged else f"not converged in {settings.max_iterations} DDP iterations: the best iterate, its limits checked by simulation"

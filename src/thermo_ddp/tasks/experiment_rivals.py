@@ -48,6 +48,7 @@ class Rival:
     label: str
     terms: tuple[str, ...]
     values: Mapping[str, float]
+    derived: bool = False   # a law or a perturbed value of another explanation (not an explanation of its own)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,6 +92,16 @@ class Explanations:
                                                              "any programme within the limits"})
         return dataclasses.replace(self, targets=tuple(targets), untargeted=tuple(untargeted))
 
+    @property
+    def richest(self) -> Rival:
+        """The explanation with the most heat terms (the first such): whose values the experiment must pin down."""
+        return max((r for r in self.rivals if not r.derived), key=lambda r: len(set(r.terms) & set(HEAT_TERMS)))
+
+    def target_keys(self) -> np.ndarray:
+        """Mask over the common structure's free keys: the values of the target terms (in the richest explanation)."""
+        keys = {k for t in self.targets for k in term_keys(t.term, self.richest.terms)}
+        return np.array([k in keys for k in self.model.keys])
+
     def index(self, rival: Rival) -> int:
         return [r.label for r in self.rivals].index(rival.label)
 
@@ -108,9 +119,9 @@ class Explanations:
         return np.array(out, float)
 
 
-def _rival(terms, values: Mapping[str, float], suffix: str = "") -> Rival:
+def _rival(terms, values: Mapping[str, float]) -> Rival:
     ordered = canonical_terms("one_node", terms)
-    return Rival(structure_name(ordered) + suffix, ordered, {k: float(v) for k, v in values.items()})
+    return Rival(structure_name(ordered), ordered, {k: float(v) for k, v in values.items()})
 
 
 def _median_speed(diagnosis) -> float:
@@ -126,9 +137,10 @@ def _friction_laws(rival: Rival, speed: float) -> list[Rival]:
     if not heat > 0:
         return []
     base, name = dict(rival.values), rival.label
-    return [Rival(f"{name} (linear in speed)", rival.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0}),
+    return [Rival(f"{name} (linear in speed)", rival.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0},
+                  True),
             Rival(f"{name} (quadratic in speed)", rival.terms,
-                  base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2})]
+                  base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2}, True)]
 
 
 def _fitted_rivals(diagnosis, term: str) -> list[Rival]:
@@ -165,7 +177,7 @@ def _perturbed(target: Target, richest: Rival) -> Target:
     them apart is seeing that value to the precision the diagnosis asks of a named parameter."""
     keys = [k for k in term_keys(target.term, richest.terms) if richest.values.get(k, 0.0) > 0]
     extra = tuple(Rival(f"{richest.label} ({k} +{100 * PERTURBATION:.0f} %)", richest.terms,
-                        dict(richest.values) | {k: richest.values[k] * (1 + PERTURBATION)}) for k in keys)
+                        dict(richest.values) | {k: richest.values[k] * (1 + PERTURBATION)}, True) for k in keys)
     return dataclasses.replace(target, rivals=target.rivals + extra)
 
 
@@ -184,11 +196,11 @@ def explanations(diagnosis) -> Explanations:
                                                              f"(needs: {item['experiment']})"})
         else:
             targets.append(target)
-    richest = max([reference, *(r for t in targets for r in t.rivals)], key=lambda r: len(set(r.terms) & set(HEAT_TERMS)))
-    targets = [_perturbed(t, richest) if t.term in richest.terms else t for t in targets]
     union = set(reference.terms).union(*(r.terms for t in targets for r in t.rivals))
-    model = _common_model(diagnosis.params, union)
-    return Explanations(reference, tuple(targets), tuple(untargeted), model)
+    expl = Explanations(reference, tuple(targets), tuple(untargeted), _common_model(diagnosis.params, union))
+    richest = expl.richest
+    return dataclasses.replace(expl, targets=tuple(_perturbed(t, richest) if t.term in richest.terms else t
+                                                   for t in targets))
 
 
 def _common_model(params, terms) -> ThermalModel:
