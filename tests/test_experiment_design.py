@@ -166,3 +166,17 @@ def test_cli_writes_the_experiment_the_testbed_runs(tmp_path):
     assert table.dtype.names == ("time_s", "current_a", "position", "velocity")
     assert table["time_s"][-1] <= out["duration_s"] <= DURATION_S and out["peak_winding_c"] <= LIMIT_C + 0.05
     assert (tmp_path / "exp.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_the_loop_diagnoses_designs_runs_and_diagnoses_again():
+    from thermo_ddp.studies.experiment_loop import close_the_loop
+    truth, rec = passive("both_only_moving")
+    loop = close_the_loop([rec], truth, rounds=2, settings=ExperimentSettings(limit_c=LIMIT_C, progress=False))
+    assert loop.success and loop.rounds[0].design.designed
+    assert loop.rounds[0].named == ("drive_heating",)      # the passive recording alone misses the friction heat
+    for r in loop.rounds:
+        assert r.true_peak_winding_c is None or r.true_peak_winding_c <= LIMIT_C
+        assert r.design.duration_s <= DURATION_S
+    assert set(loop.final.missing_physics) == {"friction_heating", "drive_heating"}
+    assert "round 1" in loop.report() and json.dumps(loop.to_dict())

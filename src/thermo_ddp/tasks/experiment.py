@@ -109,7 +109,6 @@ def _functions(model, params, dt_s: float, explanations: int):
     drivers = _drivers(params)(u[0], u[1])
     h = dt_s / SUBSTEPS
     inputs = ca.vertcat(h, drivers[:3], p[0], drivers[3:])
-    assert inputs.shape[0] == len(INPUT_ROWS)
     z = x
     for _ in range(SUBSTEPS):
         z = model.step(ca.vertcat(z, ca.SX.zeros(n * (q + 1))), inputs, th)[:n]

@@ -26,7 +26,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..diagnose._thermal_terms import MOVING_RAD_S, term_keys
+from ..diagnose._thermal_terms import MOVING_RAD_S, ONE_SPEED_SPREAD, SPEED_TERMS, term_keys
 from ..identify.thermal import (FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, ThermalModel, canonical_terms,
                                 default_fixed, network_model, start_values, structure_name)
 
@@ -157,9 +157,21 @@ def _fitted_rivals(diagnosis, term: str) -> list[Rival]:
     return out
 
 
+def _settled(diagnosis, term: str) -> bool:
+    """A named term whose values the recordings pin down, seen at several speeds if it grows with the speed: its
+    note can only be the held-out judgement (no experiment of current and motion changes which segments judge)."""
+    fit = diagnosis.final_fit
+    if term not in diagnosis.missing_physics or not all(fit.identifiable(k) for k in term_keys(term, fit.terms)):
+        return False
+    speeds = np.abs(np.concatenate([g.velocity for g in diagnosis.grids if g.has_velocity] or [np.zeros(0)]))
+    moving = speeds[speeds > MOVING_RAD_S]
+    return term not in SPEED_TERMS or (moving.size > 1 and np.percentile(moving, 95) > ONE_SPEED_SPREAD
+                                       * np.percentile(moving, 5))
+
+
 def _target(diagnosis, item: dict, reference: Rival) -> Target | None:
     term, chosen = item["term"], diagnosis.final_terms
-    if term not in HEAT_TERMS:
+    if term not in HEAT_TERMS or _settled(diagnosis, term):
         return None
     if term not in diagnosis.fits.get(chosen | {term}, diagnosis.final_fit).terms:  # never fitted: no motion
         start = start_values(diagnosis.params, canonical_terms("one_node", chosen | {term}))
@@ -191,7 +203,9 @@ def explanations(diagnosis) -> Explanations:
             continue
         seen.add(item["term"])
         target = _target(diagnosis, item, reference)
-        if target is None:
+        if target is None and _settled(diagnosis, item["term"]):
+            untargeted.append({"term": item["term"], "reason": "named, its values identifiable: " + item["reason"]})
+        elif target is None:
             untargeted.append({"term": item["term"], "reason": "a current and motion programme cannot settle it "
                                                              f"(needs: {item['experiment']})"})
         else:
