@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from _common import RESULTS, machine, write
+from _common import machine, write
 
 CASE_SEED = 90_000
 METHODS = ("designed", "protocol", "steps")

@@ -52,7 +52,7 @@ class ExperimentLoop:
     def report(self) -> str:
         lines = [f"experiment loop: {self.status}: {self.message}"]
         for k, r in enumerate(self.rounds, 1):
-            peak = f", robot's winding peak {r.true_peak_winding_c:.1f} °C" if r.true_peak_winding_c is not None else ""
+            peak = "" if r.true_peak_winding_c is None else f", robot's winding peak {r.true_peak_winding_c:.1f} °C"
             lines.append(f"  round {k}: named {', '.join(r.named) or 'nothing'}; undetermined "
                          f"{', '.join(r.undetermined) or 'nothing'}; design {r.design.status}{peak}")
         lines.append(f"  final: named {', '.join(self.final.missing_physics) or 'nothing'}")

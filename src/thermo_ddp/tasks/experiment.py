@@ -11,10 +11,11 @@
    sums of squares, so the divergence d_j = s_j (y_0 - y_j) / sigma (s_j: the sign it has on the start) enters as
    the residual (D - d_j) / D with a target D far above the reachable divergence: the cost falls as every d_j
    grows.  sigma: the diagnosis's residual noise.
-4. Constraints on every explanation: the winding under ``limit_c`` (a one-node explanation has no winding apart
-   from its sensor: the winding is taken as the sensor plus :data:`WINDING_RISE_FACTOR` times the parameter
-   file's winding-casing resistance times the copper loss), the bus voltage R(T) i + K_b N |v| <= V_bus; the
-   current within the file's peak and the speed within the joint's limit (boxes).
+4. Constraints on every explanation: the winding under ``limit_c``, the winding never taken below the sensor
+   plus a winding-over-sensor resistance times the copper loss at the limit (:func:`winding_rise_k_per_w`: the
+   upper end of a fitted casing node's interval, or for one node :data:`WINDING_RISE_FACTOR` times the file's:
+   a winding node the data cannot pin down must not let the design overheat the real one); the bus voltage
+   R(T) i + K_b N |v| <= V_bus; the current within the file's peak and the speed within the joint's limit.
 5. The criterion is not convex: the DDP starts from simple excitation families (:data:`FAMILIES`), each scaled
    to keep every explanation under the limit.  Of the designs within the limits, the one kept is D_s-optimal
    for the target values: the largest log det of their Fisher information (relative to their values) from the
@@ -38,7 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .._config import checked_settings, require
-from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
+from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal, term_specs
 from ..identify.thermal import load_joint_parameters
 from ..identify.thermal_data import INPUT_ROWS, ThermalGrid, _drivers
 from ..model import motor
@@ -60,7 +61,7 @@ TARGET_FACTOR = 5.0         # each pair's divergence target D_j: this many times
 TOLERANCE = 1e-4            # DDP stationarity |Qu|: the criterion is O(1), the controls O(1-10)
 LIMIT_MARGIN_K = 2.0        # the starts are scaled to stay this far under the limit
 GRID_S = 10.0               # the diagnosis's grid step: the weight of one sample of information
-FEASIBILITY_K = 0.05        # a design's simulated winding may exceed the limit by this much at most (K, and V on the bus)
+FEASIBILITY_K = 0.05        # largest excess of a design's simulated winding (K) or bus voltage (V) over its limit
 FAMILIES = ("current_steps", "two_speeds", "speeds_then_holds", "move_then_hold", "hold_then_move")
 _SRC = "design_experiment"
 
@@ -86,12 +87,23 @@ class ExperimentSettings:
 
 
 # ----------------------------------------------------------------------------- the multi-model problem
-def _winding_expr(model, params, x, u):
-    """The winding of one explanation (state x, control u): its node, or for one node the module's estimate."""
-    if model.winding != model.sensor:
-        return x[model.winding]
-    rise = WINDING_RISE_FACTOR * float(params.thermal.values.get("winding_casing_k_per_w", 0.0))
-    return x[model.sensor] + rise * motor.joule_w(params.motor, u[0], x[model.sensor])
+def winding_rise_k_per_w(diagnosis: ThermalDiagnosis) -> float:
+    """The winding-over-sensor resistance the limit is guarded with: with a casing node, the upper end of its
+    fitted winding-casing resistance's 95 % interval (within the physical range of the diagnosis); with one node,
+    :data:`WINDING_RISE_FACTOR` times the parameter file's (the data cannot resolve the winding node)."""
+    key = "winding_casing_k_per_w"
+    fit = diagnosis.final_fit
+    if key in fit.parameters:
+        top = term_specs(diagnosis.params)["casing_node"].bounds[key][1]
+        return float(min(fit.confidence.get(key, (0.0, top))[1], top))
+    return WINDING_RISE_FACTOR * float(diagnosis.params.thermal.values.get(key, 0.0))
+
+
+def _winding_expr(model, params, x, u, limit_c, rise_k_per_w: float):
+    """The winding of one explanation (state x, control u) as the limit sees it: its winding node, and never less
+    than its sensor plus ``rise_k_per_w`` times the copper loss at the limit (the steady rise over the sensor)."""
+    bound = x[model.sensor] + rise_k_per_w * motor.joule_w(params.motor, u[0], limit_c)
+    return bound if model.winding == model.sensor else ca.fmax(x[model.winding], bound)
 
 
 def _pairs(explanations: int) -> list[tuple[int, int]]:
@@ -99,7 +111,7 @@ def _pairs(explanations: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(explanations) for j in range(i + 1, explanations)]
 
 
-def _functions(model, params, dt_s: float, explanations: int):
+def _functions(model, params, dt_s: float, explanations: int, rise_k_per_w: float):
     """(step(x, u, p, theta), winding(x, u), divergence(X, p), limits(x, u, p)) of the explanations' structure;
     p = [ambient_c, limit_c, then per pair its sign over its target D_j]."""
     n, q = len(model.nodes), len(model.keys)
@@ -113,8 +125,8 @@ def _functions(model, params, dt_s: float, explanations: int):
     for _ in range(SUBSTEPS):
         z = model.step(ca.vertcat(z, ca.SX.zeros(n * (q + 1))), inputs, th)[:n]
     step = ca.Function("experiment_step", [x, u, p, th], [z], ["x", "u", "p", "theta"], ["x_next"])
-    w = _winding_expr(model, params, x, u)
-    winding = ca.Function("winding", [x, u], [w], ["x", "u"], ["winding_c"])
+    w = _winding_expr(model, params, x, u, p[1], rise_k_per_w)
+    winding = ca.Function("winding", [x, u, p], [w], ["x", "u", "p"], ["winding_c"])
     m = params.motor
     g = ca.vertcat(w - p[1], motor.resistance_ohm(m, w) * u[0] + m.back_emf_v_s_per_rad * m.gear_ratio * u[1]
                    - m.bus_voltage_v)
@@ -165,8 +177,8 @@ class _Design:
     def windings(self, xs, us) -> np.ndarray:
         """(N+1, K) every explanation's winding (at the last knot with the last control)."""
         states = self.mm.scenario_states(xs)
-        u = np.vstack([us, us[-1:]])
-        return np.array([[float(self.winding(s, uk)) for s in st] for st, uk in zip(states, u)])
+        u, p = np.vstack([us, us[-1:]]), [self.ambient_c, self.limit_c, *np.ones(self.pairs)]
+        return np.array([[float(self.winding(s, uk, p)) for s in st] for st, uk in zip(states, u)])
 
     def divergences(self, xs) -> np.ndarray:
         """(N+1, pairs) the difference of the sensor predictions of every pair of explanations, in K."""
@@ -174,17 +186,18 @@ class _Design:
         return np.column_stack([y[:, i] - y[:, j] for i, j in _pairs(y.shape[1])])
 
 
-def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float, u_max, settings) -> _Design:
+def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float, u_max, settings,
+           rise_k_per_w: float) -> _Design:
     model, params = expl.model, expl.model.params
     knots = max(1, int(math.ceil(settings.duration_s / settings.dt_s - 1e-9)))
     dt_s = settings.duration_s / knots
     thetas = np.array([expl.theta(r) for r in expl.rivals])
     pairs = len(_pairs(thetas.shape[0]))
-    step, winding, divergence, limits = _functions(model, params, dt_s, thetas.shape[0])
+    step, winding, divergence, limits = _functions(model, params, dt_s, thetas.shape[0], rise_k_per_w)
     u = ca.SX.sym("u", 2)
     effort = Cost("effort", 1e-6, ca.Function("r", [u], [u / ca.DM(u_max)], ["u"], ["r"]))
-    mm = MultiModelProblem(step, knots, thetas.shape[0], costs=[effort],
-                           cross_costs=[Cost("divergence", 1.0 / (knots * pairs), _cross(divergence, len(model.nodes), thetas.shape[0]))],
+    cross = Cost("divergence", 1.0 / (knots * pairs), _cross(divergence, len(model.nodes), thetas.shape[0]))
+    mm = MultiModelProblem(step, knots, thetas.shape[0], costs=[effort], cross_costs=[cross],
                            constraints=[Constraint("winding_and_bus", limits)], u_lb=[0.0, 0.0], u_ub=list(u_max),
                            parameters=KnotParameters((("ambient_limit", 2), ("pair_scales", pairs))),
                            name="designed_experiment")
@@ -232,7 +245,8 @@ def _scaled(design: _Design, shape: np.ndarray) -> np.ndarray | None:
         lo, hi = (mid, hi) if peak(mid) <= design.limit_c - LIMIT_MARGIN_K else (lo, mid)
     us = shape * [lo, 1.0]
     m = design.expl.model.params.motor
-    bus = (m.bus_voltage_v - 1.0 - motor.resistance_ohm(m, design.limit_c) * us[:, 0]) / (m.back_emf_v_s_per_rad * m.gear_ratio)
+    emf = m.back_emf_v_s_per_rad * m.gear_ratio
+    bus = (m.bus_voltage_v - 1.0 - motor.resistance_ohm(m, design.limit_c) * us[:, 0]) / emf
     us[:, 1] = np.clip(np.minimum(us[:, 1], bus), 0.0, None)
     return us if lo > 0 else None
 
@@ -306,6 +320,7 @@ def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSe
     score = float(np.mean(np.log(np.maximum(rms / design.sigma_c, 1e-12))))
     blocks = passive + [_sensitivities(design, _knot_grid(design, us), design.dt_s / GRID_S)]
     info = _log_det(_information(blocks, design.expl.target_keys()))
+    log.info("start %s: %s; divergence %.3g, information %.3g", family, result.message, score, info)
     return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}", info)
 
 
@@ -314,7 +329,8 @@ def _over(design: _Design, xs, us) -> float:
     u = np.vstack([us, us[-1:]])
     windings = design.windings(xs, us)
     m = design.expl.model.params.motor
-    bus = motor.resistance_ohm(m, windings) * u[:, :1] + m.back_emf_v_s_per_rad * m.gear_ratio * u[:, 1:] - m.bus_voltage_v
+    emf = m.back_emf_v_s_per_rad * m.gear_ratio
+    bus = motor.resistance_ohm(m, windings) * u[:, :1] + emf * u[:, 1:] - m.bus_voltage_v
     return float(max((windings - design.limit_c).max(), bus.max()))
 
 
@@ -466,7 +482,8 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
     lo, hi, vmax = joint_bounds(params, settings.margin_rad)
     u_max = np.array([params.motor.current_peak_a, vmax])
     tic = time.perf_counter()
-    design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
+    rise = winding_rise_k_per_w(diagnosis)
+    design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings, rise)
     starts, reach = _starts(design)
     keep = _distinct(design.thetas.shape[0], reach, design.sigma_c)
     if len(keep) < design.thetas.shape[0]:
@@ -475,7 +492,7 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
             return _not_designed("not_designable", "no current and motion programme within the limits moves the "
                                  "explanations' predictions a sensor noise apart", settings, limit_c,
                                  untargeted=expl.untargeted)
-        design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings)
+        design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings, rise)
         starts, reach = _starts(design)
     targets = TARGET_FACTOR * np.maximum(reach, design.sigma_c)
     passive = [_sensitivities(design, g, float(np.median(np.diff(g.time_s))) / GRID_S) for g in diagnosis.grids]
@@ -483,13 +500,15 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
               for f, us in tqdm(starts.items(), desc="design-experiment starts", disable=_hide(settings))]
     best = max((s for s in solved if math.isfinite(s.score)), key=lambda s: s.information, default=None)
     common = dict(untargeted=expl.untargeted, labels=tuple(r.label for r in expl.rivals),
-                  targets=tuple(t.term for t in expl.targets), starts={s.family: {"divergence": s.score, "information": s.information} if math.isfinite(s.score) else None
-                          for s in solved},
+                  targets=tuple(t.term for t in expl.targets),
+                  starts={s.family: {"divergence": s.score, "information": s.information}
+                          if math.isfinite(s.score) else None for s in solved},
                   solve_s=time.perf_counter() - tic)
     if best is None:
         reasons = "; ".join(s.message for s in solved) or "no start stays under the limit"
         return _not_designed("failed", f"no design within the limits ({reasons})", settings, limit_c, **common)
-    optimum = "converged" if best.converged else f"not converged in {settings.max_iterations} DDP iterations: the best iterate, its limits checked by simulation"
+    optimum = "converged" if best.converged else (f"not converged in {settings.max_iterations} DDP iterations: the "
+                                                  "best iterate, its limits checked by simulation")
     message = (f"settles {', '.join(common['targets'])} in {settings.duration_s / 60:.0f} min "
                f"(best start: {best.family}, {optimum}; {len(expl.rivals)} explanations)")
     return ExperimentDesign(True, "designed", message, settings, limit_c,
@@ -520,4 +539,4 @@ def _hide(settings: ExperimentSettings) -> bool | None:
 
 
 __all__ = ["ExperimentDesign", "ExperimentSettings", "FAMILIES", "PROGRAMME_COLUMNS", "check_request",
-           "design_experiment", "write_programme"]
+           "design_experiment", "winding_rise_k_per_w", "write_programme"]

@@ -137,8 +137,8 @@ def _friction_laws(rival: Rival, speed: float) -> list[Rival]:
     if not heat > 0:
         return []
     base, name = dict(rival.values), rival.label
-    return [Rival(f"{name} (linear in speed)", rival.terms, base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0},
-                  True),
+    return [Rival(f"{name} (linear in speed)", rival.terms,
+                  base | {FRICTION_KEYS[0]: heat / speed, FRICTION_KEYS[1]: 0.0}, True),
             Rival(f"{name} (quadratic in speed)", rival.terms,
                   base | {FRICTION_KEYS[0]: 0.0, FRICTION_KEYS[1]: heat / speed ** 2}, True)]
 
@@ -147,7 +147,8 @@ def _fitted_rivals(diagnosis, term: str) -> list[Rival]:
     """Fitted sets that toggle ``term`` or trade it for a heat it is confused with (same nodes as chosen) and
     that the recordings do not reject (RMSE within :data:`RIVAL_RMSE_FACTOR` of the chosen fit's)."""
     chosen, fits = diagnosis.final_terms, diagnosis.fits
-    sets = [chosen ^ {term}] + [(chosen - {term}) | {p} for p in CONFUSED[term]] + [chosen | {term, p} for p in CONFUSED[term]]
+    sets = [chosen ^ {term}, *((chosen - {term}) | {p} for p in CONFUSED[term]),
+            *(chosen | {term, p} for p in CONFUSED[term])]
     out = []
     for terms in dict.fromkeys(s for s in sets if s != chosen):
         fit = fits.get(terms)
