@@ -15,7 +15,7 @@
    plus a winding-over-sensor resistance times the copper loss at the limit (:func:`winding_rise_k_per_w`: the
    upper end of a fitted casing node's interval, or for one node :data:`WINDING_RISE_FACTOR` times the file's:
    a winding node the data cannot pin down must not let the design overheat the real one); the bus voltage
-   R(T) i + K_b N |v| <= V_bus; the current within the file's peak and the speed within the joint's limit.
+   R(T) i + K_b N abs(v) <= V_bus; the current within the file's peak and the speed within the joint's limit.
 5. The criterion is not convex: the DDP starts from simple excitation families (:data:`FAMILIES`), each scaled
    to keep every explanation under the limit.  Of the designs within the limits, the one kept is D_s-optimal
    for the target values: the largest log det of their Fisher information (relative to their values) from the
