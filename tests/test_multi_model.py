@@ -153,3 +153,22 @@ def test_bad_multi_model_input_is_refused():
         mm.x0(np.array([[0.0, 0.0, 30.0], [0.1, 0.0, 30.0]]))
     with pytest.raises(InputError, match="thetas"):
         mm.params(GOAL, np.ones((3, 2)))
+
+
+def test_scenarios_of_one_state_without_shared_states():
+    """One private state per scenario and no shared one (a thermal node per explanation, issue 25): the stacked
+    step is each scenario's own step, and a cross cost reads every scenario."""
+    x, u, th = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("theta", 2)
+    step = ca.Function("step", [x, u, th], [x + DT * (5.0 * u ** 2 - (x - T_AMB) / th[0]) / th[1]],
+                       ["x", "u", "theta"], ["x_next"])
+    X = ca.SX.sym("X", 1, 3)
+    spread = Cost("spread", 1.0, ca.Function("r", [X], [ca.vertcat(X[0] - X[1], X[0] - X[2])], ["X"], ["r"]))
+    mm = MultiModelProblem(step, N, 3, cross_costs=[spread])
+    thetas = np.array([NOMINAL, [2.4, 0.4], [1.6, 0.6]])
+    x0 = mm.x0(np.array([[30.0], [31.0], [29.0]]))
+    params = mm.params(None, thetas)
+    assert (mm.problem.nx, mm.problem.n_params) == (3, 6)
+    xn = np.array(mm.problem.functions.step(x0, 0.7, params[0])).ravel()
+    np.testing.assert_allclose(xn, [float(step(x0[k], 0.7, thetas[k])) for k in range(3)], rtol=1e-14)
+    r = np.array(mm.problem.functions.stage_residual(x0, 0.7, params[0])).ravel()
+    np.testing.assert_allclose(r, [30.0 - 31.0, 30.0 - 29.0], rtol=1e-14)

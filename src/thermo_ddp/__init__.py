@@ -13,14 +13,16 @@ from .monitor import ArmMonitor, monitor_bag, monitor_recordings
 from .tasks.limits import DEFAULT_HOLD_S
 from .tasks.lift import LiftPlan, LiftSettings, compare_limits, plan_lift
 from .tasks.whole_arm import WholeArmPlan, WholeArmSettings, plan_whole_arm
+from .tasks.experiment import ExperimentDesign, ExperimentSettings, design_experiment
 from .mpc import MPCSettings, run_closed_loop
 from .model.parameters import JointParameters, load_parameters, save_parameters
 from .model.thermal import ThermalNetwork, network_from_parameters, one_node_response
 
 __all__ = [
-    "ActuatedArm", "ArmMonitor", "ArmSettings", "DEFAULT_HOLD_S", "InputError", "JointParameters", "LEFT_ARM",
+    "ActuatedArm", "ArmMonitor", "ArmSettings", "DEFAULT_HOLD_S", "ExperimentDesign", "ExperimentSettings",
+    "InputError", "JointParameters", "LEFT_ARM",
     "LiftPlan", "LiftSettings", "MPCSettings", "ThermalNetwork", "Trajectory", "WholeArmPlan", "WholeArmSettings",
-    "compare_limits", "plan_lift", "plan_whole_arm", "run_closed_loop", "build_arm", "load_model",
+    "compare_limits", "design_experiment", "plan_lift", "plan_whole_arm", "run_closed_loop", "build_arm", "load_model",
     "load_parameters", "monitor_bag", "monitor_recordings", "network_from_parameters", "one_node_response",
     "save_parameters",
 ]

@@ -133,6 +133,29 @@ def plan_parser(name: str, description: str) -> Parser:
     return cmd
 
 
+def design_parser() -> Parser:
+    from .tasks.experiment import MAX_DURATION_S, ExperimentSettings
+    cmd = Parser(prog="thermo-ddp design-experiment", description="plan the experiment (current and motion of the "
+                 "elbow) that settles what the recordings leave undetermined, under the winding limit")
+    cmd.add_argument("recordings", nargs="+", metavar="REC", help="CSV recordings (contract columns, or any "
+                                                                  "columns with --columns); required")
+    cmd.add_argument("--model", metavar="TOML", help="parameter file (default: the packaged "
+                                                     "models/arm_left_4_joint.toml)")
+    cmd.add_argument("--columns", metavar="MAP.toml", help="column map of the recordings (default: contract columns)")
+    cmd.add_argument("--limit-c", type=number("°C"), default=None,
+                     help="winding limit in °C (default: the model file's [limits] safety_cutoff_c, 84 °C for the "
+                          "elbow)")
+    cmd.add_argument("--duration-s", type=number("s"), default=ExperimentSettings.duration_s,
+                     help=f"longest experiment, in s (default %(default)g s; at most {MAX_DURATION_S:g} s)")
+    cmd.add_argument("--out", dest="experiment_csv", metavar="EXP.csv", required=True,
+                     help="write the experiment here, in the recording format (time_s, current_a, position, "
+                          "velocity); required")
+    _json_option(cmd, "experiment")
+    cmd.add_argument("--plot", metavar="EXP.png", help="write the planned current, speed and predicted temperatures "
+                                                       "here (default: none)")
+    return cmd
+
+
 def loop_parser() -> Parser:
     from .studies.loop import SHORT_DEFAULTS, LoopSettings
     cmd = Parser(prog="thermo-ddp loop", description="recordings -> identification -> diagnosis -> improved "

@@ -21,8 +21,8 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._cli_parsers import (JSON_STDOUT, Parser, cache_parser, demo_parser, loop_parser, plan_parser, recording_parser,
-                           split_global, sweep_parser)
+from ._cli_parsers import (JSON_STDOUT, Parser, cache_parser, demo_parser, design_parser, loop_parser, plan_parser,
+                           recording_parser, split_global, sweep_parser)
 from ._cli_parsers import top_parser as _top_parser
 from ._logs import configure_logging
 from ._reports import MAX_LINES, diagnosis_report, files_report, fit_lines, identification_report
@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 # Argument names holding input paths, and the output options by argument name: every output is
 # refused when it is also an input (checked before any work, whatever the verb).
 INPUT_ARGS = ("recordings", "model", "columns")
-OUTPUT_ARGS = {"json": "--json", "plot": "--plot", "write_model": "--write-model"}
+OUTPUT_ARGS = {"json": "--json", "plot": "--plot", "write_model": "--write-model", "experiment_csv": "--out"}
 FIGURE_OPTIONS = ("--plot",)
 
 
@@ -88,6 +88,19 @@ def _loop(args, out: Outputs) -> Run:
     files = f"  files in {args.out}/: loop.txt, loop.json, loop.png, loop_summary.png, diagnosis.json, diagnosis.png, " \
             "models/*.toml, recordings/*.csv"
     return Run(f"{report}\n{files}", {"success": table.get("success")}, stage=False)
+
+
+def _design_experiment(args, out: Outputs) -> Run:
+    from .tasks.experiment import ExperimentSettings, check_request, design_experiment, write_programme
+    settings = ExperimentSettings(duration_s=args.duration_s, limit_c=args.limit_c, progress=_progress(args))
+    params = check_request(args.model, settings)
+    from .recordings import read_recordings
+    recordings = read_recordings(args.recordings, args.columns)
+    design = design_experiment(list(recordings.recordings), params, settings)
+    if design.designed:
+        out.figure("--out", lambda path: write_programme(design.programme(), path))
+        out.figure("--plot", design.plot)
+    return Run(design.report(), design.to_dict())
 
 
 def _cache(args, out: Outputs) -> Run:
@@ -257,6 +270,8 @@ COMMANDS = {
     "validate": Command("predict recordings with a parameter file as it is and report the error",
                         lambda: recording_parser("validate", "predict recordings with a parameter file as it is "
                                                              "(no refit) and report the error", True), _validate),
+    "design-experiment": Command("plan the experiment that settles what recordings leave undetermined",
+                                 design_parser, _design_experiment),
     "loop": Command("the whole chain on the simulated elbow: record, diagnose, improve, plan, run",
                     loop_parser, _loop),
     "sweep": Command("randomised closed-loop lifts on Dask: margins and holds", sweep_parser, _sweep),

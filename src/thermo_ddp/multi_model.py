@@ -206,7 +206,7 @@ class MultiModelProblem:
 
     def _stacked_step(self, sym) -> ca.SX:
         nexts = [_call(_try_sx(self.dynamics), sym.scenario(k, stage=True)) for k in range(self.scenarios)]
-        return ca.vertcat(nexts[0][:self.shared], *[xn[self.shared:] for xn in nexts])
+        return ca.vertcat(nexts[0][:self.shared, 0], *[xn[self.shared:, 0] for xn in nexts])
 
     def _depends_on_scenario(self, fun: ca.Function) -> bool:
         x, th = ca.SX.sym("x", self.nx_scenario), ca.SX.sym("theta", self.n_theta)
@@ -251,7 +251,7 @@ class _Symbols:
 
     def state(self, k: int):
         mm, s = self.mm, self.mm.shared
-        return ca.vertcat(self.x[:s], self.x[s + k * mm.n_private: s + (k + 1) * mm.n_private])
+        return ca.vertcat(self.x[:s, 0], self.x[s + k * mm.n_private: s + (k + 1) * mm.n_private])
 
     def theta(self, k: int):
         start = self.mm.n_params + k * self.mm.n_theta

@@ -120,9 +120,19 @@ def record(truth: ThreeNodeTruth, rng: np.random.Generator, name: str = "truth",
            gaps: int = 0, ambient_drift_c: float = 0.0) -> Recording:
     """Simulate ``truth`` on a randomised session and measure it (see the module docstring)."""
     t, current, speed = campaign_inputs(rng, duration_s)
+    return run_inputs(truth, rng, t, current, speed, name, noise_c, quantum_c, sample_s, jitter, gaps,
+                      ambient_drift_c)[0]
+
+
+def run_inputs(truth: ThreeNodeTruth, rng: np.random.Generator, t: np.ndarray, current: np.ndarray,
+               speed: np.ndarray, name: str = "truth", noise_c: float = 0.05, quantum_c: float = 0.0,
+               sample_s: float = 1.0, jitter: float = 0.0, gaps: int = 0, ambient_drift_c: float = 0.0
+               ) -> tuple[Recording, np.ndarray]:
+    """Simulate ``truth`` on given inputs (held over the steps of ``t``, a uniform grid from 0; joint speed
+    ``speed``, logged as the velocity) and measure it: (the recording, the true node temperatures on ``t``)."""
     room = 24.0 + ambient_drift_c * np.sin(2 * np.pi * t / rng.uniform(4000, 12000) + rng.uniform(0, 6.3))
-    temps = truth.simulate(current, speed, room)
-    times = np.cumsum(sample_s * (1 + jitter * rng.uniform(-1, 1, int(1.2 * duration_s / sample_s))))
+    temps = truth.simulate(current, speed, room, float(t[1] - t[0]))
+    times = np.cumsum(sample_s * (1 + jitter * rng.uniform(-1, 1, int(1.2 * (t[-1] + t[1] - t[0]) / sample_s))))
     times = times[times < t[-1]]
     for _ in range(gaps):
         start = rng.uniform(0.1, 0.9) * t[-1]
@@ -131,8 +141,9 @@ def record(truth: ThreeNodeTruth, rng: np.random.Generator, name: str = "truth",
     casing = np.interp(times, t, temps[:, 1]) + rng.normal(0, noise_c, times.size)
     if quantum_c > 0:
         casing = np.round(casing / quantum_c) * quantum_c
-    return Recording(name=name, time_s=times, current_a=current[k], temperature_c=casing, velocity=speed[k],
-                     ambient_c=room[k] + rng.normal(0, 0.05, times.size))
+    rec = Recording(name=name, time_s=times, current_a=current[k], temperature_c=casing, velocity=speed[k],
+                    ambient_c=room[k] + rng.normal(0, 0.05, times.size))
+    return rec, temps
 
 
 def random_case(seed: int, concealed: Sequence[str] | None = None) -> tuple[Recording, ThreeNodeTruth]:
@@ -276,3 +287,17 @@ def network_case(seed: int, family: str) -> tuple[Recording, Recording, NetworkT
     train = record_network(truth, rng, f"{family}_{seed}", speeds_rad_s=(0.0, 150.0, 300.0, 400.0))
     unseen = record_network(truth, rng, f"{family}_{seed}_unseen", speeds_rad_s=(500.0, 600.0), coolant_c=45.0)
     return train, unseen, truth
+
+
+def run_programme(truth: ThreeNodeTruth, programme: Mapping[str, np.ndarray], rng: np.random.Generator,
+                  name: str = "programme", **measurement) -> tuple[Recording, np.ndarray]:
+    """The truth runs a programme (recording-format columns ``time_s``, ``current_a``, ``velocity``, e.g. a
+    designed experiment): current and speed averaged over each second, then :func:`run_inputs` (``measurement``:
+    its noise, sampling and room options).  Returns the recording and the true node temperatures per second."""
+    t = np.asarray(programme["time_s"], float)
+    grid = np.arange(0.0, t[-1], 1.0)
+    k = np.minimum((t / 1.0).astype(int), grid.size - 1)
+    count = np.bincount(k, minlength=grid.size)
+    current = np.bincount(k, np.asarray(programme["current_a"], float), grid.size) / np.maximum(count, 1)
+    speed = np.bincount(k, np.abs(np.asarray(programme["velocity"], float)), grid.size) / np.maximum(count, 1)
+    return run_inputs(truth, rng, grid, current, speed, name, **measurement)

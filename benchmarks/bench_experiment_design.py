@@ -1,0 +1,124 @@
+"""Designed experiments against the report's protocol and a plain current-step test, at equal duration.
+
+Cases: randomised three-node truths (``thermo_ddp.testing.testbed.truths.random_case``: values +-30 %, a random
+concealed subset of friction heating, drive heating and a casing node, sensor noise, quantisation, drifting
+room, jittered sampling, gaps; their sessions move at ONE speed) whose passive recording leaves a heat term
+undetermined (the design has a target).  Each case adds one experiment of ``--duration-s`` to the passive
+recording, run on the same truth, and diagnoses both together:
+
+- ``designed``: ``design_experiment`` (the default settings, the elbow's 84 °C cut-off);
+- ``protocol``: the seed report's: move back and forth at the passive session's speed at 3 A for half the
+  time, then hold still at the same current (the same RMS current);
+- ``steps``: a plain current-step test at rest: 4 A and 0 A alternating every quarter.
+
+Per method: the share of cases with the exact term set named (the truth's concealed set) AND every named
+parameter identifiable (95 % half-width <= 50 % of its value); the mean relative error of the friction-heat
+and drive-idle values named where the truth has them; the peak true winding; the wall time of the design.
+Writes benchmarks/results/experiment_design.json.
+
+    python benchmarks/bench_experiment_design.py [--cases 12] [--workers 2] [--duration-s 3600]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import time
+
+import numpy as np
+
+from _common import machine, write
+
+CASE_SEED = 90_000
+METHODS = ("designed", "protocol", "steps")
+
+
+def protocol_inputs(duration_s: float, speed: float):
+    t = np.arange(0.0, duration_s, 1.0)
+    moving = t < duration_s / 2
+    return t, np.full(t.size, 3.0), np.where(moving, speed * np.sign(np.sin(2 * np.pi * t / 20.0) + 1e-9), 0.0)
+
+
+def step_inputs(duration_s: float):
+    t = np.arange(0.0, duration_s, 1.0)
+    return t, np.where((t // (duration_s / 4)) % 2 == 0, 4.0, 0.0), np.zeros(t.size)
+
+
+def judge(truth, diagnosis) -> dict:
+    from thermo_ddp.identify.thermal import FRICTION_KEYS
+    out = diagnosis.to_dict()
+    named = set(diagnosis.missing_physics)
+    loose = [k for m in out["missing_physics"] for k, v in m["parameters"].items()
+             if k not in m["ci95"] or (m["ci95"][k][1] - m["ci95"][k][0]) / 2 > 0.5 * abs(v)]
+    errors = []
+    fit = diagnosis.final_fit.parameters if diagnosis.final_fit is not None else {}
+    if "friction_heating" in named & truth.concealed:
+        true = (truth.friction_linear_w_s_per_rad, truth.friction_quadratic_w_s2_per_rad2)
+        errors += [abs(fit[k] - v) / v for k, v in zip(FRICTION_KEYS, true)]
+    if "drive_heating" in named & truth.concealed and "drive_idle_w" in fit:
+        errors.append(abs(fit["drive_idle_w"] - truth.drive_idle_w) / truth.drive_idle_w)
+    exact = named == set(truth.concealed)
+    return {"named": sorted(named), "exact": exact, "loose": loose, "settled": exact and not loose,
+            "errors": errors, "status": diagnosis.status}
+
+
+def run_case(job: tuple[int, float]) -> dict:
+    from thermo_ddp.diagnose.thermal import diagnose_thermal
+    from thermo_ddp.tasks.experiment import ExperimentSettings, design_experiment
+    from thermo_ddp.testing.testbed.truths import random_case, run_inputs, run_programme
+
+    seed, duration_s = job
+    rec, truth = random_case(CASE_SEED + seed)
+    before = diagnose_thermal(rec)
+    out = {"seed": CASE_SEED + seed, "concealed": sorted(truth.concealed), "named_before": before.missing_physics}
+    tic = time.perf_counter()
+    design = design_experiment([rec], settings=ExperimentSettings(duration_s=duration_s, progress=False),
+                               diagnosis=before)
+    out |= {"design_status": design.status, "targets": list(design.targets), "design_s": time.perf_counter() - tic}
+    if not design.designed:
+        return out
+    speed = float(np.median(np.abs(rec.velocity[np.abs(rec.velocity) > 0.05])))
+    measurement = {"noise_c": 0.05, "sample_s": 2.0}
+    rng = np.random.default_rng(seed)
+    runs = {"designed": run_programme(truth, design.programme(), rng, "designed", **measurement),
+            "protocol": run_inputs(truth, rng, *protocol_inputs(duration_s, speed), "protocol", **measurement),
+            "steps": run_inputs(truth, rng, *step_inputs(duration_s), "steps", **measurement)}
+    for method, (run, temps) in runs.items():
+        out[method] = judge(truth, diagnose_thermal([rec, run])) | {"peak_winding_c": float(temps[:, 0].max()),
+                                                                  "duration_s": float(run.time_s[-1])}
+    out["design_peak_winding_c"] = design.peak_winding_c
+    return out
+
+
+def summary(cases: list[dict]) -> dict:
+    done = [c for c in cases if "designed" in c]
+    out = {"cases_drawn": len(cases), "cases_with_targets": len(done),
+           "design_statuses": {s: sum(c["design_status"] == s for c in cases)
+                               for s in sorted({c["design_status"] for c in cases})}}
+    for m in METHODS:
+        errors = [e for c in done for e in c[m]["errors"]]
+        out[m] = {"settled_share": float(np.mean([c[m]["settled"] for c in done])) if done else None,
+                  "exact_share": float(np.mean([c[m]["exact"] for c in done])) if done else None,
+                  "mean_parameter_error": float(np.mean(errors)) if errors else None,
+                  "max_peak_winding_c": max((c[m]["peak_winding_c"] for c in done), default=None)}
+    out["median_design_s"] = float(np.median([c["design_s"] for c in done])) if done else None
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--cases", type=int, default=12)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--duration-s", type=float, default=3600.0)
+    args = parser.parse_args()
+    start = time.perf_counter()
+    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+        cases = pool.map(run_case, [(k, args.duration_s) for k in range(args.cases)], chunksize=1)
+    payload = {"summary": summary(cases), "cases": cases, "duration_s": args.duration_s, "workers": args.workers,
+               "wall_s": time.perf_counter() - start, "machine": machine()}
+    write("experiment_design", payload)
+    print(json.dumps(payload["summary"], indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""Designed experiments (thermo_ddp.tasks.experiment): the experiment the DDP plans from a diagnosis, run on the
+testbed's hidden truths (thermo_ddp.testing.testbed.truths) and diagnosed again with the passive recording.
+
+Oracles: the truth's concealed terms and friction-heat values (c1 |v| + c2 v^2), its true winding temperature,
+the request's duration and the joint's URDF range and speed limit.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from thermo_ddp.diagnose.thermal import diagnose_thermal
+from thermo_ddp.identify.thermal import FRICTION_KEYS
+from thermo_ddp.tasks.experiment import ExperimentSettings, design_experiment
+from thermo_ddp.tasks.experiment_motion import joint_bounds
+from thermo_ddp.identify.thermal import load_joint_parameters
+from thermo_ddp.testing.testbed.truths import ThreeNodeTruth, run_inputs, run_programme
+
+HEAT = {"friction_heating", "drive_heating", "iron_losses", "copper_resistance"}
+LIMIT_C, DURATION_S = 84.0, 3600.0
+MEASUREMENT = {"noise_c": 0.05, "sample_s": 2.0}
+# passive sessions: (duration s, current A, speed rad/s) segments, the speed reversing every 10 s
+CASES = {
+    "friction_one_speed": ({"friction_heating"}, [(600, 0, 0), (2400, 3.5, 0), (2400, 3.0, 1.5), (2400, 0, 0)]),
+    "both_only_moving": ({"friction_heating", "drive_heating"}, [(600, 0, 0), (3600, 3.0, 1.5), (3600, 0, 0)]),
+    "friction_never_excited": ({"friction_heating"}, [(600, 0, 0), (3600, 3.5, 0), (3600, 0, 0)]),
+    "nothing_missing": (set(), [(600, 0, 0), (2400, 3.5, 0), (2400, 3.0, 1.5), (2400, 3.0, 0.5), (2400, 0, 0)]),
+}
+
+
+def passive(name: str):
+    concealed, segments = CASES[name]
+    t = np.arange(0.0, sum(s[0] for s in segments), 1.0)
+    k = np.minimum(np.searchsorted(np.cumsum([s[0] for s in segments]), t, side="right"), len(segments) - 1)
+    current = np.array([s[1] for s in segments], float)[k] * (1 + 0.05 * np.sin(2 * np.pi * t / 60))
+    speed = np.array([s[2] for s in segments], float)[k] * np.sign(np.sin(2 * np.pi * t / 20.0) + 1e-9)
+    truth = ThreeNodeTruth(concealed=frozenset(concealed))
+    rec, _ = run_inputs(truth, np.random.default_rng(1), t, np.round(current, 2), speed, name, **MEASUREMENT)
+    return truth, rec
+
+
+def designed_and_rediagnosed(name: str):
+    truth, rec = passive(name)
+    design = design_experiment([rec], settings=ExperimentSettings(duration_s=DURATION_S, limit_c=LIMIT_C,
+                                                                  progress=False))
+    assert design.success and design.status == "designed", design.message
+    rows = design.programme()
+    run, temps = run_programme(truth, rows, np.random.default_rng(2), name="designed", **MEASUREMENT)
+    return truth, design, rows, temps, diagnose_thermal([rec, run])
+
+
+def check_settled(truth, design, rows, temps, after):
+    # safety and the request: the true winding under the limit, the duration, the joint's range and speed
+    assert temps[:, 0].max() <= LIMIT_C
+    assert rows["time_s"][-1] <= DURATION_S and design.duration_s <= DURATION_S
+    lo, hi, vmax = joint_bounds(load_joint_parameters(None), 0.0)
+    assert lo <= rows["position"].min() and rows["position"].max() <= hi
+    assert np.abs(rows["velocity"]).max() <= vmax and rows["velocity"][-1] == 0.0
+    acceleration = np.abs(np.diff(rows["velocity"]) / np.diff(rows["time_s"]))
+    assert acceleration.max() <= design.settings.acceleration_rad_s2 * (1 + 1e-9)
+    assert design.peak_winding_c <= LIMIT_C + 0.05
+    # the exact heat terms, every named parameter within +-50 %, friction heat within 40 % of the truth
+    assert after.status == "ok"
+    assert set(after.missing_physics) & HEAT == set(truth.concealed) & HEAT
+    for term in after.to_dict()["missing_physics"]:
+        for key, value in term["parameters"].items():
+            low, high = term["ci95"][key]
+            assert (high - low) / 2 <= 0.5 * abs(value), (term["term"], key, value, low, high)
+    if "friction_heating" in truth.concealed:
+        fit = after.final_fit.parameters
+        true = (truth.friction_linear_w_s_per_rad, truth.friction_quadratic_w_s2_per_rad2)
+        for key, value in zip(FRICTION_KEYS, true):
+            assert abs(fit[key] - value) <= 0.4 * value, (key, fit[key], value)
+
+
+def test_designed_experiment_settles_friction_heat_seen_at_one_speed():
+    _, rec = passive("friction_one_speed")
+    before = diagnose_thermal(rec)
+    assert before.missing_physics == ["friction_heating"]
+    assert not before.final_fit.identifiable(FRICTION_KEYS[0])   # one speed: c1 and c2 not separable
+    truth, design, rows, temps, after = designed_and_rediagnosed("friction_one_speed")
+    assert design.targets == ("friction_heating",) and design.predicted_separation_k["friction_heating"] > 0
+    check_settled(truth, design, rows, temps, after)
+
+
+@pytest.mark.slow
+def test_designed_experiment_settles_friction_heat_never_excited():
+    truth, design, rows, temps, after = designed_and_rediagnosed("friction_never_excited")
+    assert design.targets[0] == "friction_heating"
+    check_settled(truth, design, rows, temps, after)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 25's case 'drive + friction heat seen only while moving': the terms "
+                   "come out exact, but one designed hour leaves the drive's and the friction heat's values collinear "
+                   "with the one-node capacity and resistance (half-widths > 50 %)")
+def test_designed_experiment_settles_drive_and_friction_heat_seen_only_while_moving():
+    truth, design, rows, temps, after = designed_and_rediagnosed("both_only_moving")
+    assert set(after.missing_physics) == {"friction_heating", "drive_heating"}   # exact terms: this holds
+    check_settled(truth, design, rows, temps, after)
+
+
+def test_a_truth_with_nothing_missing_names_nothing():
+    _, rec = passive("nothing_missing")
+    design = design_experiment([rec], settings=ExperimentSettings(progress=False))
+    assert design.success and design.status == "nothing_undetermined" and design.targets == ()
+    assert design.to_dict()["predicted_separation_k"] == {} and design.to_dict()["duration_s"] == 0.0
+
+
+def write_csv(rec, path):
+    columns = ("time_s", "current_a", "temperature_c", "velocity", "ambient_c")
+    np.savetxt(path, np.column_stack([getattr(rec, c) for c in columns]), delimiter=",", header=",".join(columns),
+               comments="")
+    return str(path)
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--duration-s", "0"], "duration_s = 0.0: must be in (0, 86400]"),
+    (["--duration-s", "90000"], "duration_s = 90000.0: must be in (0, 86400]"),
+    (["--limit-c", "40"], "not above the winding's temperature at rest, 43.0 °C"),
+    (["--limit-c", "150"], "above the winding's rated maximum"),
+])
+def test_bad_requests_get_one_line_and_exit_2(tmp_path, capsys, options, message):
+    from thermo_ddp.cli import main
+    t = np.arange(0.0, 30.0, 10.0)
+    rec = type("R", (), {"time_s": t, "current_a": 0 * t, "temperature_c": 30 + 0 * t, "velocity": 0 * t,
+                         "ambient_c": 25 + 0 * t})
+    csv = write_csv(rec, tmp_path / "rec.csv")
+    assert main(["design-experiment", csv, "--out", str(tmp_path / "exp.csv"), *options]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err
+    assert main(["design-experiment", csv, "--out", csv]) == 2
+    assert "is also an input" in capsys.readouterr().err
+    assert not (tmp_path / "exp.csv").exists()
+
+
+def test_cli_says_so_when_nothing_is_undetermined_and_writes_no_experiment(tmp_path, capsys):
+    from thermo_ddp.cli import main
+    _, rec = passive("nothing_missing")
+    csv = write_csv(rec, tmp_path / "rec.csv")
+    code = main(["design-experiment", csv, "--out", str(tmp_path / "exp.csv"), "--plot", str(tmp_path / "exp.png"),
+                 "--json", str(tmp_path / "exp.json")])
+    assert code == 0 and "nothing undetermined" in capsys.readouterr().out
+    assert not (tmp_path / "exp.csv").exists() and not (tmp_path / "exp.png").exists()
+    out = json.loads((tmp_path / "exp.json").read_text())
+    assert out["status"] == "nothing_undetermined" and out["targets"] == [] and out["success"]
+
+
+@pytest.mark.slow
+def test_cli_writes_the_experiment_the_testbed_runs(tmp_path):
+    _, rec = passive("friction_one_speed")
+    csv = write_csv(rec, tmp_path / "rec.csv")
+    exp, js = tmp_path / "exp.csv", tmp_path / "exp.json"
+    done = subprocess.run([sys.executable, "-m", "thermo_ddp.cli", "design-experiment", csv, "--out", str(exp),
+                           "--json", str(js), "--plot", str(tmp_path / "exp.png")], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    out = json.loads(js.read_text())
+    assert out["status"] == "designed" and out["targets"] == ["friction_heating"]
+    assert set(out) >= {"success", "status", "message", "targets", "duration_s", "peak_winding_c", "limit_c",
+                        "predicted_separation_k"}
+    table = np.genfromtxt(exp, delimiter=",", names=True)
+    assert table.dtype.names == ("time_s", "current_a", "position", "velocity")
+    assert table["time_s"][-1] <= out["duration_s"] <= DURATION_S and out["peak_winding_c"] <= LIMIT_C + 0.05
+    assert (tmp_path / "exp.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_the_loop_diagnoses_designs_runs_and_diagnoses_again():
+    from thermo_ddp.studies.experiment_loop import close_the_loop
+    truth, rec = passive("both_only_moving")
+    loop = close_the_loop([rec], truth, rounds=2, settings=ExperimentSettings(limit_c=LIMIT_C, progress=False))
+    assert loop.success and loop.rounds[0].design.designed
+    assert loop.rounds[0].named == ("drive_heating",)      # the passive recording alone misses the friction heat
+    for r in loop.rounds:
+        assert r.true_peak_winding_c is None or r.true_peak_winding_c <= LIMIT_C
+        assert r.design.duration_s <= DURATION_S
+    assert set(loop.final.missing_physics) == {"friction_heating", "drive_heating"}
+    assert "round 1" in loop.report() and json.dumps(loop.to_dict())
