@@ -13,7 +13,7 @@ import pytest
 from thermo_ddp.errors import InputError
 from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
 from thermo_ddp.tasks.lift import LIFT_PARAMETERS, LiftSettings, build_lift_problem, plan_lift
-from thermo_ddp.tasks.robust import Uncertainty, _env_of, robust_problem
+from thermo_ddp.tasks.robust import Uncertainty, env_of, robust_problem
 from thermo_ddp.tasks.uncertainty import UncertaintySet, WorstCase, scenario_step
 from thermo_ddp.testing.thermal_replay import replay_winding_c
 
@@ -47,7 +47,7 @@ def worst_case(plan):
     lp = build_lift_problem(plan.settings).with_hold(plan.achieved_hold_s)
     m = lp.model
     uset = UncertaintySet.from_fraction(m.params[m.joints[0]], 0.2)
-    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, _env_of)
+    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, env_of)
     return lp, uset, WorstCase(m, uset, step, m.index(m.joints[0], "winding_c"), lp.x0[2:])
 
 
@@ -82,7 +82,7 @@ def test_uncertainty_sets_and_bad_input(tmp_path):
 
 def test_scenario_step_is_the_models_step_at_the_files_values(nominal84):
     lp, uset, _ = worst_case(nominal84)
-    step = scenario_step(lp.model, uset.keys, 0.1, "rk4_4", LIFT_PARAMETERS.size, _env_of)
+    step = scenario_step(lp.model, uset.keys, 0.1, "rk4_4", LIFT_PARAMETERS.size, env_of)
     ref = lp.model.step_function(0.1, "rk4_4", runtime_payload=True)
     for k in (5, 30, 150):
         x, u, p = nominal84.xs[k], nominal84.us[k], lp.params[k]
