@@ -87,9 +87,11 @@ def bench_limit(limit_c: float, repeats: int, solvers) -> dict:
             uset = UncertaintySet.from_fraction(params, FRACTION)
             motors = [uset.parameters(params, th) for th in uset.sample(np.random.default_rng(SEED), DRAWS)]
             casing = {"casing": float(nominal.series("casing_c")[0, 0])}
-            out["replay"] = {"nominal": exceedances(nominal, motors, casing), "robust": exceedances(robust, motors, casing)}
+            out["replay"] = {"nominal": exceedances(nominal, motors, casing),
+                             "robust": exceedances(robust, motors, casing)}
             measured = plan_lift(40.0, limit_c, uncertainty=Uncertainty(FRACTION, "measured"))
-            out["start_measured"] = {"hold_s": measured.achieved_hold_s, "scenarios": int(measured.robust.thetas.shape[0]),
+            out["start_measured"] = {"hold_s": measured.achieved_hold_s,
+                                     "scenarios": int(measured.robust.thetas.shape[0]),
                                      "replay": exceedances(measured, motors, nominal.xs[0, 2:])}
             rest = plan_lift(40.0, limit_c, uncertainty=Uncertainty(FRACTION, "rest"))
             out["start_rest"] = {"hold_s": rest.achieved_hold_s, "scenarios": int(rest.robust.thetas.shape[0]),

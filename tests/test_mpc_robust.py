@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from thermo_ddp.errors import InputError
-from thermo_ddp.mpc import MPCSettings, RecedingHorizonController, build_models, mpc_solver, planning_problem, run_closed_loop
+from thermo_ddp.mpc import (MPCSettings, RecedingHorizonController, build_models, mpc_solver, planning_problem,
+                            run_closed_loop)
 from thermo_ddp.studies.sweep import OBSERVER, _controller, draw, run_seeds
 from thermo_ddp.tasks.robust import TOLERANCE_K
 

@@ -14,6 +14,9 @@ Joule heat the winding conducts away at its present temperatures, from the model
 planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
 the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
 time constant of tens of minutes this tightens the limit by about as much over the whole window.
+
+With ``settings.controller.robust_uncertainty`` the hold is also kept safe for every motor of an uncertainty
+set (:mod:`thermo_ddp.mpc.robust`).
 """
 from __future__ import annotations
 

@@ -7,7 +7,8 @@ resistance, the drive's losses, the winding resistance). The EKF estimates one c
 thermal resistances (:mod:`thermo_ddp.mpc.observer`); each resistance's interval is narrowed to
 ``s +- robust_sigmas * std(s)`` times the file's value (:meth:`RobustHold.narrow`, called by the closed loop
 every period): the set shrinks as the estimate's variance does. The other values keep their prior intervals
-(the observer does not estimate them).
+(the observer does not estimate them); without the observer's scale (``estimate_resistance_scale`` off) the
+set stays the prior.
 
 At the cold plan and then every ``robust_replan_s`` while lifting or holding (:meth:`RobustHold.review`):
 the worst motor of the current set for the accepted plan (:class:`~thermo_ddp.tasks.uncertainty.WorstCase`,
@@ -15,7 +16,9 @@ every motor from the planning state: the estimate, raised by the controller's ti
 exceeds the planning limit by more than :data:`~thermo_ddp.tasks.robust.TOLERANCE_K`, the hold is cut to
 where it crosses and re-solved until no motor does; otherwise a hold shorter than the task's is lengthened
 by one ``hold_step_s`` when the re-solve with it is accepted and safe for the set. The re-solves themselves
-stay nominal (one model): the set decides the hold, the model the current.
+stay nominal (one model): the set decides the hold, the model the current. A review's searches and re-solves
+are not counted against ``max_solve_s`` (the period's real-time budget): on a robot they belong in a slower
+thread beside the loop.
 """
 from __future__ import annotations
 

@@ -175,7 +175,8 @@ class SweepResult:
         margin = "n/a" if s["min_margin_c"] is None else f"{s['min_margin_c']:.2f} K"
         failed = [r["seed"] for r in self.runs if "error" in r]
         plan = "nominal hold" if self.nominal_plan else f"hold robust to +-{100 * THERMAL_SPREAD:g} %"
-        lines = [f"sweep ({plan}) on {self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers): "
+        engine = f"{self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers)"
+        lines = [f"sweep ({plan}) on {engine}: "
                  f"{s['runs']} runs in {self.wall_s:.1f} s, {s['failed_runs']} did not run to the end"
                  + (f" (seeds {', '.join(map(str, failed[:5]))}{' ...' if len(failed) > 5 else ''}; messages in "
                     "the JSON)" if failed else ""),

@@ -252,8 +252,8 @@ class WorstCase:
                starts: int = _STARTS) -> WorstMotor:
         """The motor with the highest winding peak: L-BFGS-B on the box (normalised) from the vertex the
         gradient at the file's values points to, its neighbour with the smallest gradient component
-        flipped, and random vertices (``starts`` in all); the best end point, certified when its gradient points out of the box
-        at every bound it sits on and vanishes elsewhere."""
+        flipped, and random vertices (``starts`` in all); the best end point, certified when its gradient
+        points out of the box at every bound it sits on and vanishes elsewhere."""
         calls = [0]
 
         def negative_peak(z):
