@@ -82,19 +82,20 @@ class RobustHold:
 
     def review(self, controller, x: np.ndarray, result: SolverResult, extend: bool = True):
         """The plan ``result`` from the planning state ``x`` checked against the set: ``(plan, solves, event)``;
-        the plan is ``result`` itself, a re-solve with a shorter hold (event ``robust_cut``) or with a longer
-        one (``robust_extend``); ``solves`` lists the re-solves made."""
+        the plan is ``result`` itself, a re-solve with a shorter hold (event ``robust_cut``; when a cut's
+        re-solve is not accepted, the last accepted plan with the hold already cut) or with a longer one
+        (``robust_extend``); ``solves`` lists the re-solves made. Every plan returned is accepted."""
         limit = controller.lp.settings.limit_c + TOLERANCE_K
         motor, solves = self.search(controller, x, result), []
         if motor.peak_c > limit:
             for _ in range(MAX_CUTS):
                 if not self._cut(controller, x, result, motor):
                     break
-                result = controller.solver.solve(x, controller.window(), WarmStart.from_result(result))
-                solves.append(result)
-                if not controller._acceptable(result, False):
-                    break
-                motor = self.search(controller, x, result)
+                cut = controller.solver.solve(x, controller.window(), WarmStart.from_result(result))
+                solves.append(cut)
+                if not controller._acceptable(cut, False):  # the last accepted plan stays; the hold is cut:
+                    break                                   # the next re-solve plans it
+                result, motor = cut, self.search(controller, x, cut)
                 if motor.peak_c <= limit:
                     break
             log.info("t = %.1f s: hold cut to %.1f s for the set (worst motor %.2f °C)",
