@@ -94,9 +94,10 @@ class _Networks:
         return out
 
 
-def idle_temperatures(params: JointParameters) -> np.ndarray:
-    """Every node's equilibrium at rest of one motor."""
-    return _Networks([params]).idle()[0]
+def idle_temperatures(params: JointParameters, measured: dict[str, float] | None = None) -> np.ndarray:
+    """Every node's equilibrium at rest of one motor; ``measured`` (``{"casing": 43.0}``): those nodes held at
+    the given temperatures, the others at their equilibrium given them."""
+    return _Networks([params]).idle(measured)[0]
 
 
 def replay_winding_c(motors, time_s, current_a, velocity_rad_s, start_c=None) -> np.ndarray:
