@@ -27,7 +27,10 @@ from thermo_ddp.studies.loop import (LoopSettings, claim, loop_files, mpc_settin
 from thermo_ddp.mpc import ExtendedKalmanFilter, MPCSettings
 from thermo_ddp.mpc.plant import Measurement
 from thermo_ddp.model.parameters import load_parameters
+from thermo_ddp.tasks.lift import plan_lift
+from thermo_ddp.tasks.uncertainty import UncertaintySet
 from thermo_ddp.testing.testbed import JOINT, PlantParameters, steady_state
+from thermo_ddp.testing.thermal_replay import replay_winding_c
 from thermo_ddp.testing.testbed.physics import thermal_network
 
 def load_column_map_text(text: str):
@@ -254,3 +257,24 @@ def test_loop_refuses_a_column_map_inside_its_output_folder(tmp_path, capsys, mo
     columns = tmp_path / "out" / "map.toml"
     assert main(["loop", "--short", "--out", str(tmp_path / "out"), "--columns", str(columns)]) == 2
     assert "inside the output folder" in capsys.readouterr().err and columns.read_text() == ROBOT_LOG
+
+
+def test_the_identified_intervals_give_a_robust_plan(chain):
+    """Issue 26 with the intervals of a real identification: the improved file's [uncertainty] (the refit's 95 %
+    intervals) gives a robust hold, reported with the nominal one; 200 motors drawn in those intervals and
+    replayed independently (scipy, casing at the plan's reading) stay within 0.5 K of the limit under it."""
+    out, _ = chain
+    path = out / "models" / f"{ELBOW}_improved.toml"
+    params = load_parameters(path)
+    intervals = params.scope.uncertainty
+    assert len(intervals) >= 5 and all(np.isfinite(hi) and lo < hi for lo, hi in intervals.values())
+    assert all(lo <= params.value(k) <= hi for k, (lo, hi) in intervals.items())
+    plan = plan_lift(40.0, LIMIT_C, parameter_file=str(path), uncertainty="file")
+    r = plan.robust.to_dict()
+    assert r["uncertainty"] == "file" and r["worst_winding_c"] <= LIMIT_C + 0.1
+    assert 0 < plan.achieved_hold_s <= r["nominal_hold_s"] and "nominal motor alone" in plan.message
+    uset = UncertaintySet.from_file(params, path)
+    motors = [uset.parameters(params, th) for th in uset.sample(np.random.default_rng(0), 200)]
+    casing = {"casing": float(plan.series("casing_c")[0, 0])}
+    w = replay_winding_c(motors, plan.time_s, plan.us, plan.series("v_rad_s"), casing)
+    assert w.max() <= LIMIT_C + 0.5

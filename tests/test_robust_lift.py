@@ -13,9 +13,9 @@ import pytest
 from thermo_ddp.errors import InputError
 from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
 from thermo_ddp.tasks.lift import LIFT_PARAMETERS, LiftSettings, build_lift_problem, plan_lift
-from thermo_ddp.tasks.robust import Uncertainty, _env_of, robust_problem
+from thermo_ddp.tasks.robust import Uncertainty, env_of, robust_problem, start_nodes
 from thermo_ddp.tasks.uncertainty import UncertaintySet, WorstCase, scenario_step
-from thermo_ddp.testing.thermal_replay import replay_winding_c
+from thermo_ddp.testing.thermal_replay import idle_temperatures, replay_winding_c
 
 ELBOW_FILE = packaged_parameter_file("arm_left_4_joint")
 DRAWS = 200
@@ -47,7 +47,7 @@ def worst_case(plan):
     lp = build_lift_problem(plan.settings).with_hold(plan.achieved_hold_s)
     m = lp.model
     uset = UncertaintySet.from_fraction(m.params[m.joints[0]], 0.2)
-    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, _env_of)
+    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, env_of)
     return lp, uset, WorstCase(m, uset, step, m.index(m.joints[0], "winding_c"), lp.x0[2:])
 
 
@@ -82,7 +82,7 @@ def test_uncertainty_sets_and_bad_input(tmp_path):
 
 def test_scenario_step_is_the_models_step_at_the_files_values(nominal84):
     lp, uset, _ = worst_case(nominal84)
-    step = scenario_step(lp.model, uset.keys, 0.1, "rk4_4", LIFT_PARAMETERS.size, _env_of)
+    step = scenario_step(lp.model, uset.keys, 0.1, "rk4_4", LIFT_PARAMETERS.size, env_of)
     ref = lp.model.step_function(0.1, "rk4_4", runtime_payload=True)
     for k in (5, 30, 150):
         x, u, p = nominal84.xs[k], nominal84.us[k], lp.params[k]
@@ -115,10 +115,33 @@ def test_worst_motor_search_beats_brute_force_and_its_gradient_is_exact(nominal8
     assert worst.peak_c == pytest.approx(wc.peak(worst.theta, qv, us, p, amb)[0])
 
 
+def sensor_start(plan) -> dict:
+    """The default start: the casing at the plan's reading, every other node at each motor's rest given it."""
+    return {"casing": float(plan.series("casing_c")[0, 0])}
+
+
+def test_sensor_start_is_each_motors_rest_given_the_casing(nominal84):
+    """The planner's start of motor theta (CasADi, the network builder) against the independent replay's
+    (numpy, hand-written networks): casing pinned, winding at the casing (no heat at rest), drive balanced."""
+    lp = build_lift_problem(nominal84.settings)
+    m = lp.model
+    uset = UncertaintySet.from_fraction(m.params[m.joints[0]], 0.2)
+    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, env_of)
+    wc = WorstCase(m, uset, step, m.index(m.joints[0], "winding_c"), lp.x0[2:], start_nodes(m, "sensor"))
+    params = m.params[m.joints[0]]
+    for theta in uset.sample(np.random.default_rng(3), 5):
+        ours = wc.initial_c(theta, m.ambient_c)
+        oracle = idle_temperatures(uset.parameters(params, theta), sensor_start(nominal84))
+        np.testing.assert_allclose(ours, oracle, rtol=1e-12, atol=1e-9)
+        assert ours[0] == pytest.approx(lp.x0[3]) and ours[1] == pytest.approx(lp.x0[3])
+    assert np.ptp([wc.initial_c(th, m.ambient_c)[2] for th in uset.sample(np.random.default_rng(4), 20)]) > 1.0
+
+
 def test_robust_plan_keeps_every_motor_under_the_limit(nominal84, robust84):
-    """Must show (issue 26), 84 °C, +-20 %: 200 random motors replayed independently: none more than 0.5 K over
-    the limit under the robust plan, many under the nominal one; the robust hold at least half the nominal."""
-    motors, start = draws(robust84), nominal84.xs[0, 2:]
+    """Must show (issue 26), 84 °C, +-20 %: 200 random motors replayed independently, each from the casing's
+    reading (the default start): none more than 0.5 K over the limit under the robust plan, many under the
+    nominal one; the robust hold at least half the nominal."""
+    motors, start = draws(robust84), sensor_start(nominal84)
     assert np.count_nonzero(peaks_over_limit(nominal84, motors, start) > 0.5) >= DRAWS // 4
     assert peaks_over_limit(robust84, motors, start).max() <= 0.5
     r = robust84.robust
@@ -156,7 +179,7 @@ def test_cli_refuses_a_bad_fraction():
 @pytest.mark.slow
 def test_robust_plan_at_140_c():
     nominal, robust = plan_lift(40.0, 140.0), plan_lift(40.0, 140.0, uncertainty=0.2)
-    motors, start = draws(robust), nominal.xs[0, 2:]
+    motors, start = draws(robust), sensor_start(nominal)
     assert np.count_nonzero(peaks_over_limit(nominal, motors, start) > 0.5) >= DRAWS // 4
     assert peaks_over_limit(robust, motors, start).max() <= 0.5
     assert 0.5 * nominal.achieved_hold_s <= robust.achieved_hold_s

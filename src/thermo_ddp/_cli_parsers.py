@@ -186,6 +186,9 @@ def sweep_parser() -> Parser:
                      help=f"flag: a {SHORT['hold_s']:g} s hold instead of {CONTROLLER['hold_s']:g} s")
     cmd.add_argument("--seed", type=int, default=0, help="seed of the sweep; run i's seed is word i of its "
                                                          "stream (default %(default)s)")
+    cmd.add_argument("--nominal-plan", action="store_true",
+                     help="flag: the controller holds as long as its model alone allows (default: the hold robust "
+                          "to the sweep's +-25 %% thermal spread)")
     engine_arguments(cmd)
     _json_option(cmd, "sweep")
     cmd.add_argument("--plot", metavar="OUT.png", help="write the margin and hold histograms here (default: none)")

@@ -175,7 +175,7 @@ def _sweep(args, out: Outputs) -> Run:
     from .studies.sweep import robustness_sweep
     result = robustness_sweep(args.runs, args.seed, args.short, EngineSettings(scheduler=args.scheduler,
                                                                                workers=args.workers),
-                              progress=_progress(args))
+                              progress=_progress(args), nominal_plan=args.nominal_plan)
     out.figure("--plot", result.plot)
     return Run(result.report(), result.to_dict())
 

@@ -235,6 +235,8 @@ class _Supervisor:
         if not ekf.monitor.trusted:
             t += c.sensor_fault_backoff_c
         self.controller.tightening_c = t
+        if self.controller.robust is not None and ekf.augmented:  # the set narrows as the EKF learns the scale
+            self.controller.robust.narrow(ekf.resistance_scale, ekf.resistance_scale_std)
         return t
 
     def payload(self, m: Measurement, k: int) -> list[str]:

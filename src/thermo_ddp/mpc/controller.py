@@ -14,6 +14,9 @@ Joule heat the winding conducts away at its present temperatures, from the model
 planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
 the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
 time constant of tens of minutes this tightens the limit by about as much over the whole window.
+
+With ``settings.controller.robust_uncertainty`` the hold is also kept safe for every motor of an uncertainty
+set (:mod:`thermo_ddp.mpc.robust`).
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ from ..ocp import Constraint, OptimalControlProblem
 from ..solvers import DDPSettings, SolverResult, WarmStart
 from ..solvers.kkt import constraint_rows
 from ..tasks.limits import default_limit_c
+from .robust import RobustHold
 from .settings import MPCSettings
 
 log = logging.getLogger(__name__)
@@ -183,6 +187,7 @@ class RecedingHorizonController:
         self._thermal = np.arange(2 * lp.model.nu, lp.model.nx)
         self._winding = lp.model.node_indices("winding")
         self._ode = lp.model.ode
+        self.robust = RobustHold(self) if settings.controller.robust_uncertainty > 0 else None
 
     @property
     def hold_s(self) -> float:
@@ -244,6 +249,10 @@ class RecedingHorizonController:
                 self.hold_knots, result, status = best_lp.hold_knots[1] - best_lp.hold_knots[0], best, "hold_shortened"
                 iterations += best.iterations
         events = ("hold_shortened",) if status == "hold_shortened" else ()
+        if self.robust is not None and self._acceptable(result, False):  # the hold the set allows
+            result, more, event = self.robust.review(self, lp.x0, result, extend=False)
+            solves, total = solves + len(more), total + sum(r.solve_s for r in more)
+            iterations, events = iterations + sum(r.iterations for r in more), events + ((event,) if event else ())
         if not self._acceptable(result, False):
             log.warning("no feasible initial plan (%s); applying the best iterate", result.reason or result.status)
             status, events = "fallback", events + ("no_feasible_plan",)
@@ -271,6 +280,9 @@ class RecedingHorizonController:
         t = self.k * self.lp.settings.dt_s
         events = ["hold_shortened"] if status == "hold_shortened" else []
         if self._acceptable(result) and not self._late(sum(r.solve_s for r in results)):
+            if self.robust is not None and self.robust.due(self.k):  # the set's review (mpc.robust)
+                result, more, event = self.robust.review(self, x_est, result)
+                results, events = results + more, events + ([event] if event else [])
             self.plan, self.plan_age = result, 0
             current = result.us[0]
             if status == "hold_shortened":

@@ -128,6 +128,11 @@ class ExtendedKalmanFilter:
     def resistance_scale(self) -> float:
         return float(self.z[-1]) if self.augmented else 1.0
 
+    @property
+    def resistance_scale_std(self) -> float:
+        """The standard deviation of the resistance scale's estimate (0 without the scale)."""
+        return float(np.sqrt(self.P[-1, -1])) if self.augmented else 0.0
+
     # --- filter -------------------------------------------------------------------------
     def initialise(self, m: Measurement) -> None:
         """Idle equilibrium scaled (or, without idle heat, shifted) to the measured sensor node (the casing,

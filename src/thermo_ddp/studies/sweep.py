@@ -38,9 +38,11 @@ MAX_RUNS = 100_000  # a sweep's runs are kept in memory and written as one JSON
 
 # The controller of the sweep: the casing sensor and the motor voltage (resistance thermometry of the
 # winding) in the EKF, a settled start (winding = casing), a larger prior on the resistance scale, a
-# winding process noise that lets the voltage correct a wrong heat capacity, and a back-off of 2 sigma.
+# winding process noise that lets the voltage correct a wrong heat capacity, and a back-off of 2 sigma;
+# the hold robust to the sweep's own thermal spread (mpc.robust), unless the nominal plan is asked for.
 CONTROLLER = dict(hold_s=15.0, observe_voltage=True, observer_start="settled", uncertainty_sigmas=2.0,
-                  plant_resistance_scale=1.0)
+                  plant_resistance_scale=1.0, robust_uncertainty=THERMAL_SPREAD)
+NOMINAL_PLAN = dict(robust_uncertainty=0.0)  # --nominal-plan: the hold of the planner's model alone
 SHORT = dict(hold_s=5.0)  # --short: a 5 s hold instead of 15 s
 RESOLVE_FAILURES = ("solve_failed", "solve_timeout")  # a run's events that are a failed re-solve
 OBSERVER = ObserverSettings(winding_c=0.3, initial_resistance_scale=0.15)
@@ -66,8 +68,8 @@ def draw(seed: int) -> dict[str, Any]:
             "seed": int(seed)}
 
 
-def _controller(short: bool) -> dict[str, Any]:
-    return {**CONTROLLER, **(SHORT if short else {})}
+def _controller(short: bool, nominal_plan: bool = False) -> dict[str, Any]:
+    return {**CONTROLLER, **(SHORT if short else {}), **(NOMINAL_PLAN if nominal_plan else {})}
 
 
 @functools.cache
@@ -78,12 +80,12 @@ def _solver(short: bool):
     return mpc_solver(planning_problem(settings, model), settings)
 
 
-def sweep_run(seed: int, short: bool = False) -> dict[str, Any]:
-    """One randomised closed loop and its nominal twin: a pure function of ``seed`` (and ``short``);
-    plain numbers only (the Sweep JSON's run entry)."""
+def sweep_run(seed: int, short: bool = False, nominal_plan: bool = False) -> dict[str, Any]:
+    """One randomised closed loop and its nominal twin: a pure function of ``seed`` (and ``short``,
+    ``nominal_plan``); plain numbers only (the Sweep JSON's run entry)."""
     solver = _solver(short)
     d = draw(seed)
-    controller = _controller(short)
+    controller = _controller(short, nominal_plan)
     settings = MPCSettings.from_options(**controller, **d)
     nominal = MPCSettings.from_options(**controller, plant_initial_c=d["plant_initial_c"], seed=int(seed))
     t0 = time.perf_counter()
@@ -130,6 +132,7 @@ class SweepResult:
     seed: int
     short: bool
     wall_s: float
+    nominal_plan: bool = False
 
     @property
     def success(self) -> bool:
@@ -161,8 +164,8 @@ class SweepResult:
 
     def to_dict(self) -> dict[str, Any]:
         return {"success": self.success, "status": self.status, "message": self.message,
-                "engine": self.engine, "seed": self.seed, "short": self.short,
-                "controller": {**_controller(self.short), "observer": dataclasses.asdict(OBSERVER)},
+                "engine": self.engine, "seed": self.seed, "short": self.short, "nominal_plan": self.nominal_plan,
+                "controller": {**_controller(self.short, self.nominal_plan), "observer": dataclasses.asdict(OBSERVER)},
                 "spreads": {"thermal": THERMAL_SPREAD, "friction": FRICTION_SPREAD, "initial_c": list(INITIAL_C)},
                 "runs": list(self.runs), "summary": self.summary()}
 
@@ -171,7 +174,9 @@ class SweepResult:
         ratio = "n/a" if s["median_hold_ratio"] is None else f"{s['median_hold_ratio']:.2f}"
         margin = "n/a" if s["min_margin_c"] is None else f"{s['min_margin_c']:.2f} K"
         failed = [r["seed"] for r in self.runs if "error" in r]
-        lines = [f"sweep on {self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers): "
+        plan = "nominal hold" if self.nominal_plan else f"hold robust to +-{100 * THERMAL_SPREAD:g} %"
+        engine = f"{self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers)"
+        lines = [f"sweep ({plan}) on {engine}: "
                  f"{s['runs']} runs in {self.wall_s:.1f} s, {s['failed_runs']} did not run to the end"
                  + (f" (seeds {', '.join(map(str, failed[:5]))}{' ...' if len(failed) > 5 else ''}; messages in "
                     "the JSON)" if failed else ""),
@@ -198,9 +203,11 @@ def _failed(seed: int, message: str) -> dict[str, Any]:
 
 
 def robustness_sweep(runs: int = 200, seed: int = 0, short: bool = False,
-                     engine: EngineSettings | None = EngineSettings(), progress: bool | None = True) -> SweepResult:
+                     engine: EngineSettings | None = EngineSettings(), progress: bool | None = True,
+                     nominal_plan: bool = False) -> SweepResult:
     """``runs`` randomised closed loops: on Dask (``engine``: a LocalCluster by default, or the cluster
-    at ``engine.scheduler``), or in this process one after the other when ``engine`` is None."""
+    at ``engine.scheduler``), or in this process one after the other when ``engine`` is None. The
+    controller's hold is robust to the sweep's thermal spread (``nominal_plan``: the model's alone)."""
     integer = isinstance(runs, (int, np.integer)) and not isinstance(runs, bool)
     require(integer and 1 <= runs <= MAX_RUNS, "robustness_sweep", "runs", runs, f"expected an integer in [1, {MAX_RUNS}]")
     require(isinstance(seed, (int, np.integer)) and seed >= 0, "robustness_sweep", "seed", seed,
@@ -208,11 +215,12 @@ def robustness_sweep(runs: int = 200, seed: int = 0, short: bool = False,
     seeds = run_seeds(seed, int(runs))
     started = time.perf_counter()
     if engine is None:
-        results = tuple(sweep_run(s, short) for s in tqdm(seeds, desc="sweep", disable=hidden(progress)))
+        results = tuple(sweep_run(s, short, nominal_plan) for s in tqdm(seeds, desc="sweep", disable=hidden(progress)))
         info = {"kind": "serial", "address": "in-process", "workers": 1}
     else:
         with dask_client(engine) as client:
             info = engine_info(client).to_dict()
-            outcomes = map_tasks(client, sweep_run, seeds, progress=progress, desc="sweep", short=short)
+            outcomes = map_tasks(client, sweep_run, seeds, progress=progress, desc="sweep", short=short,
+                                 nominal_plan=nominal_plan)
         results = tuple(o.value if o.success else _failed(o.item, o.message) for o in outcomes)
-    return SweepResult(info, results, int(seed), bool(short), time.perf_counter() - started)
+    return SweepResult(info, results, int(seed), bool(short), time.perf_counter() - started, bool(nominal_plan))

@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 TOLERANCE_K = 0.1     # the largest excess over the limit of any motor of the set that a robust plan allows
 MAX_SCENARIOS = 8     # scenarios added at most (each one a worst motor the previous plan overheated)
 BAND_SAMPLES = 50     # random motors of the set replayed for the plot's band (with the worst one)
-STARTS = ("measured", "rest")
+STARTS = ("sensor", "measured", "rest")
 _STRUCTURES = Memo()  # the robust lift's stacked OCP by structure and scenario count
 _SRC = "plan_lift"
 
@@ -53,13 +53,20 @@ class Uncertainty:
 
     ``value``: a fraction (every thermal capacity and resistance, the winding resistance and the drive's
     losses within +-fraction of the file's values) or ``"file"`` (the parameter file's ``[uncertainty]``
-    intervals). ``start``: the temperatures every motor starts from: ``"measured"`` (default: the plan's
-    initial state, as the robot measures it at rest; at rest the winding is at the casing's temperature,
-    which the sensor reads), or ``"rest"`` (each motor at its own equilibrium at rest: nothing measured,
-    more conservative)."""
+    intervals). ``start``: the temperatures every motor starts from (docs/guide/planning.md):
+
+    - ``"sensor"`` (default): what the robot measures before a lift. Its casing sensor reads the plan's
+      initial casing temperature; the motor has rested (no current for minutes), so its faster nodes sit at
+      their equilibrium given that casing: the winding, which has no heat source at rest, at the casing's
+      temperature (time constant ~36 s), the unmeasured drive at each motor's own balance of idle heat and
+      conduction (~2.5 min). The casing itself (time constant tens of minutes) need not be at rest: it is read.
+    - ``"measured"``: every node at the plan's initial state for every motor (an observer's estimate taken
+      as exact, the drive included).
+    - ``"rest"``: each motor at its own equilibrium at rest, its casing included: nothing measured, the most
+      conservative (the casing sensor's reading is ignored)."""
 
     value: Any = 0.2
-    start: str = "measured"
+    start: str = "sensor"
 
     def __post_init__(self):
         if not (isinstance(self.value, str) and self.value == "file"):
@@ -95,7 +102,15 @@ class RobustLiftProblem(LiftProblem):
         return self.multi.scenario_states(xs)[:, k]
 
 
-def _env_of(p):
+def start_nodes(model: ActuatedArm, start: str):
+    """The thermal nodes every motor of the set starts at the given temperatures for ``start`` (see
+    :class:`Uncertainty`): the sensor nodes, every node (None) or none."""
+    return tuple(i - 2 * model.nu for i in model.sensor_indices()) if start == "sensor" else \
+        None if start == "measured" else ()
+
+
+def env_of(p):
+    """[ambient_c, payload_kg] of the lift's per-knot parameters ``p`` (the scenario step's environment)."""
     return ca.vertcat(p[LIFT_PARAMETERS.slice("ambient_c")], p[LIFT_PARAMETERS.slice("payload_kg")])
 
 
@@ -104,7 +119,7 @@ def _structure(lp: LiftProblem, uset: UncertaintySet, scenarios: int) -> MultiMo
 
     def build():
         costs, tcosts, cons, tcons, peak = lift_terms(model, s)
-        step = scenario_step(model, uset.keys, s.dt_s, s.integrator, LIFT_PARAMETERS.size, _env_of)
+        step = scenario_step(model, uset.keys, s.dt_s, s.integrator, LIFT_PARAMETERS.size, env_of)
         mm = MultiModelProblem(step, 1, scenarios, shared=2 * model.nu, costs=costs, terminal_costs=tcosts,
                                constraints=cons, terminal_constraints=tcons, u_lb=[-peak], u_ub=[peak],
                                parameters=LIFT_PARAMETERS, name="robust_lift")
@@ -118,7 +133,7 @@ def _structure(lp: LiftProblem, uset: UncertaintySet, scenarios: int) -> MultiMo
 
 def robust_problem(lp: LiftProblem, uset: UncertaintySet, thetas, worst: WorstCase) -> RobustLiftProblem:
     """The lift ``lp`` (nominal, any hold) with one scenario per row of ``thetas`` (the first: the file's
-    values); every scenario starts from its own idle temperatures."""
+    values); every scenario starts where the set says (:meth:`WorstCase.initial_c`)."""
     thetas = np.atleast_2d(np.asarray(thetas, float))
     mm = _structure(lp, uset, thetas.shape[0]).with_horizon(lp.problem.horizon)
     n = lp.model.nu
@@ -239,9 +254,9 @@ def plan_robust_lift(settings: LiftSettings, uncertainty) -> RobustLiftPlan:
     lp = build_lift_problem(settings)
     uset = spec.uncertainty_set(lp)
     settings, limit, model = lp.settings, lp.settings.limit_c, lp.model
-    step = scenario_step(model, uset.keys, settings.dt_s, settings.integrator, LIFT_PARAMETERS.size, _env_of)
-    start = lp.x0[2 * model.nu:] if spec.start == "measured" else None
-    worst = WorstCase(model, uset, step, model.index(model.joints[0], "winding_c"), start)
+    step = scenario_step(model, uset.keys, settings.dt_s, settings.integrator, LIFT_PARAMETERS.size, env_of)
+    worst = WorstCase(model, uset, step, model.index(model.joints[0], "winding_c"),
+                      None if spec.start == "rest" else lp.x0[2 * model.nu:], start_nodes(model, spec.start))
     nominal = plan_lift(settings=settings)
     idle_c, idle_theta = worst.hottest_idle_c(model.ambient_c)
     if idle_c >= limit:

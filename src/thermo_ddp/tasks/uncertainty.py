@@ -10,10 +10,12 @@
 - :class:`WorstCase`: the replay of a plan (its current and motion) through the scenario model, exactly
   as the planner's constraint sees it, and the motor of the set with the highest winding peak: projected
   gradient ascent (L-BFGS-B) from the vertex the gradient at the file's values points to and from a few
-  more vertices. Every motor starts from given (measured) temperatures, or from its own equilibrium at rest.
+  more vertices. Every motor starts from its own equilibrium at rest, from given temperatures, or with its
+  measured nodes (the casing sensor) at given temperatures and the others at its equilibrium given them.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -142,15 +144,25 @@ def scenario_step(model: ActuatedArm, keys, dt_s: float, integrator: str, n_para
                        ["x", "u", "p", "theta"], ["x_next"])
 
 
-def idle_temperatures(model: ActuatedArm, keys) -> ca.Function:
-    """``idle(theta, ambient_c) -> temperatures_c`` at rest (no current, no motion) of scenario ``theta``."""
+def idle_temperatures(model: ActuatedArm, keys, pinned=()) -> ca.Function:
+    """``idle(theta, ambient_c, start_c) -> temperatures_c`` at rest (no current, no motion) of scenario
+    ``theta``: the nodes ``pinned`` (indices into the joint's thermal state) at ``start_c``'s values, every
+    other node at its equilibrium given them (``pinned`` empty: the motor's own rest; every node: ``start_c``)."""
     joint = model.joints[0]
     theta, amb = ca.SX.sym("theta", len(keys)), ca.SX.sym("ambient_c")
     motor, network = _scenario_parameters(model.params[joint], keys, theta)
-    temps = ca.SX.sym("t", len(network.nodes))
+    n = len(network.nodes)
+    temps, start = ca.SX.sym("t", n), ca.SX.sym("start_c", n)
     rhs = joint_heat_rhs(network, motor, temps, 0.0, 0.0, amb)
-    a, b = ca.jacobian(rhs, temps), ca.substitute(rhs, temps, ca.DM.zeros(temps.numel()))
-    return ca.Function("idle_temperatures", [theta, amb], [ca.solve(a, -b)], ["theta", "ambient_c"], ["temperatures_c"])
+    a, b = ca.jacobian(rhs, temps), ca.substitute(rhs, temps, ca.DM.zeros(n))
+    pinned = sorted(set(int(i) for i in pinned))
+    free = [i for i in range(n) if i not in pinned]
+    out = ca.SX(start)
+    if free:  # the free nodes' heat balance with the pinned nodes given (the network is linear at rest)
+        given = ca.mtimes(a[free, pinned], start[pinned]) if pinned else ca.DM.zeros(len(free))
+        out[free] = ca.solve(a[free, free], -(b[free] + given))
+    return ca.Function("idle_temperatures", [theta, amb, start], [out], ["theta", "ambient_c", "start_c"],
+                       ["temperatures_c"])
 
 
 # --------------------------------------------------------------------------------------------
@@ -171,18 +183,35 @@ class WorstMotor:
 class WorstCase:
     """Replays of one plan's current and motion (``us`` (N, 1), shared states ``qv`` (N+1, 2), per-knot
     parameters ``params`` (N+1, np)) through every motor of ``uset``: winding trajectories and their
-    gradients with respect to theta, and the worst motor (:meth:`search`)."""
+    gradients with respect to theta, and the worst motor (:meth:`search`).
+
+    Where every motor starts (:func:`idle_temperatures`): ``start_c`` None: each at its own rest; else the
+    nodes ``pinned`` (None: every node) at ``start_c``, the others at each motor's equilibrium given them.
+    ``start_c`` is the default of every method's ``start_c`` (a receding-horizon planner passes its estimate)."""
 
     def __init__(self, model: ActuatedArm, uset: UncertaintySet, step: ca.Function, winding_index: int,
-                 start_c=None):
+                 start_c=None, pinned=None):
         self.model, self.uset, self.step, self.iw = model, uset, step, winding_index
+        nodes = model.nx - 2 * model.nu
+        self.pinned = () if start_c is None else tuple(range(nodes)) if pinned is None else tuple(pinned)
         self.idle = idle_temperatures(model, uset.keys)
-        self.start_c = None if start_c is None else np.asarray(start_c, float)
+        self.start = idle_temperatures(model, uset.keys, self.pinned)
+        self.start_c = np.zeros(nodes) if start_c is None else np.asarray(start_c, float)
         self._replays: dict[int, ca.Function] = {}
 
-    def initial_c(self, theta, ambient_c: float) -> np.ndarray:
-        """Motor ``theta``'s temperatures at the start: ``start_c`` (measured), or its own rest."""
-        return np.array(self.idle(theta, ambient_c)).ravel() if self.start_c is None else self.start_c
+    def with_set(self, uset: UncertaintySet) -> "WorstCase":
+        """The same replays (compiled once) over another box of the same values."""
+        require(uset.keys == self.uset.keys, "WorstCase", "uset.keys", uset.keys, f"expected {self.uset.keys}")
+        other = copy.copy(self)
+        other.uset = uset
+        return other
+
+    def initial_c(self, theta, ambient_c: float, start_c=None) -> np.ndarray:
+        """Motor ``theta``'s temperatures at the start (see the class docstring)."""
+        return np.array(self.start(theta, ambient_c, self._start(start_c))).ravel()
+
+    def _start(self, start_c) -> np.ndarray:
+        return self.start_c if start_c is None else np.asarray(start_c, float)
 
     def _replay(self, knots: int) -> ca.Function:
         """``replay(theta, qv, u, p, ambient_c) -> (winding_c (N+1,), peak_c, d peak / d theta)``."""
@@ -199,32 +228,37 @@ class WorstCase:
         roll = thermal.mapaccum(knots)
         th, amb = ca.MX.sym("theta", self.uset.size), ca.MX.sym("ambient_c")
         QV, U, P = ca.MX.sym("qv", 2 * n, knots), ca.MX.sym("u", n, knots), ca.MX.sym("p", p.numel(), knots)
-        t0 = self.idle(th, amb) if self.start_c is None else ca.DM(self.start_c)
+        start = ca.MX.sym("start_c", t.numel())
+        t0 = self.start(th, amb, start)
         temps = ca.horzcat(t0, roll(t0, QV, U, P, ca.repmat(th, 1, knots)))
         w = temps[self.iw - 2 * n, :].T
         peak = ca.mmax(w)  # its reverse-mode gradient is the gradient of the winding at the peak's knot
-        return ca.Function("replay", [th, QV, U, P, amb], [w, peak, ca.gradient(peak, th)],
-                           ["theta", "qv", "u", "p", "ambient_c"], ["winding_c", "peak_c", "gradient"])
+        return ca.Function("replay", [th, QV, U, P, amb, start], [w, peak, ca.gradient(peak, th)],
+                           ["theta", "qv", "u", "p", "ambient_c", "start_c"], ["winding_c", "peak_c", "gradient"])
 
-    def replay(self, theta, qv, us, params, ambient_c: float) -> np.ndarray:
+    def _call(self, theta, qv, us, params, ambient_c, start_c):
+        return self._replay(us.shape[0])(theta, qv[:-1].T, us.T, params[:-1].T, ambient_c, self._start(start_c))
+
+    def replay(self, theta, qv, us, params, ambient_c: float, start_c=None) -> np.ndarray:
         """Winding (N+1,) of motor ``theta`` under the plan."""
-        return np.array(self._replay(us.shape[0])(theta, qv[:-1].T, us.T, params[:-1].T, ambient_c)[0]).ravel()
+        return np.array(self._call(theta, qv, us, params, ambient_c, start_c)[0]).ravel()
 
-    def peak(self, theta, qv, us, params, ambient_c: float) -> tuple[float, np.ndarray]:
+    def peak(self, theta, qv, us, params, ambient_c: float, start_c=None) -> tuple[float, np.ndarray]:
         """The winding's peak of motor ``theta`` under the plan and its gradient with respect to theta."""
-        _, peak, grad = self._replay(us.shape[0])(theta, qv[:-1].T, us.T, params[:-1].T, ambient_c)
+        _, peak, grad = self._call(theta, qv, us, params, ambient_c, start_c)
         return float(peak), np.array(grad).ravel()
 
-    def search(self, qv, us, params, ambient_c: float, rng_seed: int = 0) -> WorstMotor:
+    def search(self, qv, us, params, ambient_c: float, rng_seed: int = 0, start_c=None,
+               starts: int = _STARTS) -> WorstMotor:
         """The motor with the highest winding peak: L-BFGS-B on the box (normalised) from the vertex the
         gradient at the file's values points to, its neighbour with the smallest gradient component
-        flipped, and random vertices; the best end point, certified when its gradient points out of the box
-        at every bound it sits on and vanishes elsewhere."""
+        flipped, and random vertices (``starts`` in all); the best end point, certified when its gradient
+        points out of the box at every bound it sits on and vanishes elsewhere."""
         calls = [0]
 
         def negative_peak(z):
             calls[0] += 1
-            peak, grad = self.peak(self.uset.theta(z), qv, us, params, ambient_c)
+            peak, grad = self.peak(self.uset.theta(z), qv, us, params, ambient_c, start_c)
             return -peak, -grad * 0.5 * (self.uset.high - self.uset.low)
 
         z0 = self.uset.z(self.uset.nominal)
@@ -233,9 +267,9 @@ class WorstCase:
         flipped = first.copy()
         flipped[np.argmin(np.abs(g0))] *= -1
         rng = np.random.default_rng(rng_seed)
-        starts = [first, flipped, *rng.choice([-1.0, 1.0], size=(_STARTS - 2, self.uset.size))]  # several vertices
+        vertices = [first, flipped, *rng.choice([-1.0, 1.0], size=(max(starts - 2, 0), self.uset.size))][:starts]
         best = None
-        for z in starts:
+        for z in vertices:
             res = minimize(negative_peak, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.uset.size,
                            options={"maxiter": 30})
             if best is None or res.fun < best.fun:
@@ -252,7 +286,7 @@ class WorstCase:
         the heat, so the search is the same ascent on the box)."""
         iw = self.iw - 2 * self.model.nu
         th = ca.SX.sym("theta", self.uset.size)
-        w = self.idle(th, ambient_c)[iw]
+        w = self.idle(th, ambient_c, ca.DM.zeros(self.start_c.size))[iw]
         f = ca.Function("idle_winding", [th], [w, ca.gradient(w, th)])
         half = 0.5 * (self.uset.high - self.uset.low)
 

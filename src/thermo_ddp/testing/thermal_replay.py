@@ -4,8 +4,9 @@ The contract's networks (one_node, two_node, two_node_drive; seed report eqs. 3,
 in numpy from parameter files, integrated by scipy's adaptive ``solve_ivp`` (RK45, tight tolerances) on
 the plan's currents (held over each step) and speeds (linear between knots): no code shared with the
 planner's network builder (:mod:`thermo_ddp.model.thermal`) or its RK4 step. Many motors of one network
-are integrated at once (numpy arrays over the motors). A motor starts from given (measured)
-temperatures, or from its own equilibrium at rest (no current, no motion: the drive's idle heat).
+are integrated at once (numpy arrays over the motors). A motor starts from given temperatures, from its
+own equilibrium at rest (no current, no motion: the drive's idle heat), or with some nodes measured and
+the others at its equilibrium given them.
 """
 from __future__ import annotations
 
@@ -78,24 +79,33 @@ class _Networks:
             flow[:, ia] -= (temps[:, ia] - self.ambient_c) / r
         return (flow + self.heat_w(temps, current_a, speed)) / self.caps
 
-    def idle(self) -> np.ndarray:
-        """(M, nodes) equilibrium at rest (linear in T without current)."""
-        n = len(self.nodes)
-        b = self.rhs(np.zeros((self.caps.shape[0], n)), 0.0, 0.0)
-        a = np.stack([self.rhs(np.tile(e, (self.caps.shape[0], 1)), 0.0, 0.0) - b for e in np.eye(n)], axis=-1)
-        return np.linalg.solve(a, -b[..., None])[..., 0]
+    def idle(self, measured: dict[str, float] | None = None) -> np.ndarray:
+        """(M, nodes) equilibrium at rest (linear in T without current); ``measured``: those nodes held at
+        the given temperatures, the others at their equilibrium given them."""
+        n, count = len(self.nodes), self.caps.shape[0]
+        b = self.rhs(np.zeros((count, n)), 0.0, 0.0)
+        a = np.stack([self.rhs(np.tile(e, (count, 1)), 0.0, 0.0) - b for e in np.eye(n)], axis=-1)
+        fixed = [self.nodes.index(k) for k in (measured or {})]
+        free = [i for i in range(n) if i not in fixed]
+        out = np.zeros((count, n))
+        out[:, fixed] = [measured[self.nodes[i]] for i in fixed] if fixed else 0.0
+        rhs = -(b[:, free] + np.einsum("mij,mj->mi", a[:, free][:, :, fixed], out[:, fixed]))
+        out[:, free] = np.linalg.solve(a[:, free][:, :, free], rhs[..., None])[..., 0]
+        return out
 
 
-def idle_temperatures(params: JointParameters) -> np.ndarray:
-    """Every node's equilibrium at rest of one motor."""
-    return _Networks([params]).idle()[0]
+def idle_temperatures(params: JointParameters, measured: dict[str, float] | None = None) -> np.ndarray:
+    """Every node's equilibrium at rest of one motor; ``measured`` (``{"casing": 43.0}``): those nodes held at
+    the given temperatures, the others at their equilibrium given them."""
+    return _Networks([params]).idle(measured)[0]
 
 
 def replay_winding_c(motors, time_s, current_a, velocity_rad_s, start_c=None) -> np.ndarray:
     """The winding temperature at ``time_s`` (M, N+1) of each motor of ``motors`` (parameter sets of one
     network; one set gives (N+1,)) driven by ``current_a`` (N,) held over each step and ``velocity_rad_s``
-    (N+1,), from ``start_c`` (every node, the network's order: winding, casing, drive) or, when None, each
-    motor's equilibrium at rest."""
+    (N+1,), from ``start_c``: every node (an array, the network's order: winding, casing, drive), some
+    measured nodes by name (a dict, ``{"casing": 43.0}``: the others at each motor's equilibrium at rest given
+    them) or, when None, each motor's own equilibrium at rest."""
     single = isinstance(motors, JointParameters)
     net = _Networks([motors] if single else list(motors))
     count, n = net.caps.shape
@@ -105,7 +115,10 @@ def replay_winding_c(motors, time_s, current_a, velocity_rad_s, start_c=None) ->
         k = min(max(int(np.searchsorted(t, time, side="right")) - 1, 0), i.size - 1)
         return net.rhs(y.reshape(count, n), i[k], float(np.interp(time, t, v))).ravel()
 
-    start = net.idle() if start_c is None else np.tile(np.asarray(start_c, float), (count, 1))
+    if start_c is None or isinstance(start_c, dict):
+        start = net.idle(start_c)
+    else:
+        start = np.tile(np.asarray(start_c, float), (count, 1))
     sol = solve_ivp(f, (t[0], t[-1]), start.ravel(), method="RK45", t_eval=t, rtol=1e-8, atol=1e-8,
                     max_step=float(np.min(np.diff(t))) / 2)
     if not sol.success:
