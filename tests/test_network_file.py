@@ -253,3 +253,25 @@ def test_the_planners_model_is_the_same_with_the_network_form_of_the_elbow():
         u, amb = rng.uniform(-5, 5, 1), 26.0
         a, b = (np.array(m.ode(x, u, amb), float).ravel() for m in models)
         np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
+
+
+def test_the_network_graph_draws_every_node_link_and_source(tmp_path):
+    """diagnose.figure.draw_network: each node (with its capacity), each link's resistance and each source's
+    share at each node it heats appear on the axes; the measured node is filled, the others are not."""
+    from thermo_ddp._figures import new_figure
+    from thermo_ddp.diagnose.figure import draw_network
+
+    spec = _params(NETWORK).thermal.general
+    fig, ax = new_figure(1, 1, figsize=(6, 6))
+    draw_network(spec, ax, sensors=("tooth",))
+    texts = " | ".join(t.get_text() for t in ax.texts)
+    for node in NETWORK["node"]:
+        assert f"{node['name']}\n{node['capacity_j_per_k']:.3g} J/K" in texts
+    for link in NETWORK["link"]:
+        assert f"{link['resistance_k_per_w']:.3g} K/W" in texts
+    assert "iron_losses 60 %" in texts and "iron_losses 40 %" in texts and "pump 100 %" in texts
+    assert "drive_heating 75 %" in texts and "(measured)" in texts and texts.count("(measured)") == 1
+    filled = [tuple(c.get_facecolor()[0]) for c in ax.collections]
+    assert sum(f[:3] == (1.0, 1.0, 1.0) for f in filled) == len(NETWORK["node"]) - 1  # unmeasured: white
+    fig.savefig(tmp_path / "graph.png")
+    assert (tmp_path / "graph.png").stat().st_size > 5_000
