@@ -166,9 +166,12 @@ def main() -> None:
         if args.network_per_family:
             start = time.perf_counter()
             jobs = [(f, NETWORK_SEED + k) for k in range(args.network_per_family) for f in NETWORK_FAMILIES]
-            cases = pool.map(run_network_case, jobs, chunksize=1)
-            payload["network"] = {**network_summary(cases), "cases": cases, "wall_s": time.perf_counter() - start,
-                                  "workers": args.workers}
+            cases = []
+            for case in pool.imap_unordered(run_network_case, jobs, chunksize=1):  # written as they come (long runs)
+                cases.append(case)
+                payload["network"] = {**network_summary(cases), "cases": cases, "planned": len(jobs),
+                                      "wall_s": time.perf_counter() - start, "workers": args.workers}
+                write("diagnosis_truth", payload)
     write("diagnosis_truth", payload)
     print({k: v for k, v in payload.items() if k not in ("cases", "network", "confusion")})
     print({k: v for k, v in payload.get("network", {}).items() if k != "cases"})

@@ -4,6 +4,8 @@
 written back unchanged, symbols at dotted paths."""
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -253,3 +255,49 @@ def test_the_planners_model_is_the_same_with_the_network_form_of_the_elbow():
         u, amb = rng.uniform(-5, 5, 1), 26.0
         a, b = (np.array(m.ode(x, u, amb), float).ravel() for m in models)
         np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
+
+
+def test_the_network_graph_draws_every_node_link_and_source(tmp_path):
+    """diagnose.figure.draw_network: each node (with its capacity), each link's resistance and each source's
+    share at each node it heats appear on the axes; the measured node is filled, the others are not."""
+    from thermo_ddp._figures import new_figure
+    from thermo_ddp.diagnose.figure import draw_network
+
+    spec = _params(NETWORK).thermal.general
+    fig, ax = new_figure(1, 1, figsize=(6, 6))
+    draw_network(spec, ax, sensors=("tooth",))
+    texts = " | ".join(t.get_text() for t in ax.texts)
+    for node in NETWORK["node"]:
+        assert f"{node['name']}\n{node['capacity_j_per_k']:.3g} J/K" in texts
+    for link in NETWORK["link"]:
+        assert f"{link['resistance_k_per_w']:.3g} K/W" in texts
+    assert "iron_losses 60 %" in texts and "iron_losses 40 %" in texts and "pump 100 %" in texts
+    assert "drive_heating 75 %" in texts and "(measured)" in texts and texts.count("(measured)") == 1
+    filled = [tuple(c.get_facecolor()[0]) for c in ax.collections]
+    assert sum(f[:3] == (1.0, 1.0, 1.0) for f in filled) == len(NETWORK["node"]) - 1  # unmeasured: white
+    fig.savefig(tmp_path / "graph.png")
+    assert (tmp_path / "graph.png").stat().st_size > 5_000
+
+
+def test_a_value_the_data_do_not_pin_down_gets_no_uncertainty_interval():
+    """NetworkFit.uncertainty (the file's [uncertainty], validate's band_k) holds only values the data pin down:
+    a capacity whose log has a standard error of 3 (its 95 % interval would be the whole searched range) and an
+    iron loss of 300 +- 400 W have none and are listed by undetermined(); a resistance known to 1 % and a share
+    of 0.4 +- 0.05 have theirs."""
+    from thermo_ddp.identify.network import with_values
+    from thermo_ddp.identify.network_fit import Free, NetworkFit
+
+    spec = _params(NETWORK).thermal.general
+    cap, res = "thermal.node.yoke.capacity_j_per_k", "thermal.link.tooth-yoke.resistance_k_per_w"
+    power, share = "thermal.source.iron_losses.power_w", "thermal.source.iron_losses.split.yoke"
+    free = (Free(cap, 2.0, 1e5), Free(res, 1e-4, 100.0), Free(power, 0.0, 5000.0, log=False),
+            Free(share, 0.0, 1.0, log=False))
+    fit = NetworkFit(spec, "tooth", free, {cap: 3.0, res: 0.01, power: 400.0, share: 0.05}, {}, {}, {}, 1.0, True,
+                     "converged")
+    assert set(fit.uncertainty()) == {res, share} and set(fit.undetermined()) == {cap, power}
+    lo, hi = fit.uncertainty()[res]
+    assert lo == pytest.approx(0.01 / math.exp(1.959964 * 0.01)) and hi == pytest.approx(0.01 * math.exp(1.959964 * 0.01))
+    assert fit.uncertainty()[share] == pytest.approx([0.4 - 1.959964 * 0.05, 0.4 + 1.959964 * 0.05])
+    assert fit.undetermined()[cap] == (pytest.approx(2500.0 / math.exp(1.959964 * 3.0)), 1e5) and fit.undetermined()[power] == (0.0, pytest.approx(1084.0, abs=1))
+    at_zero = NetworkFit(with_values(spec, {share: 0.0}), "tooth", free, {share: 0.05}, {}, {}, {}, 1.0, True, "converged")
+    assert at_zero.uncertainty()[share] == pytest.approx([0.0, 1.959964 * 0.05])  # a share near 0, pinned down

@@ -28,5 +28,17 @@ def test_real_motors_notebook(tmp_path, monkeypatch):
             assert r["held_out"]["terms"][term]["rmse_with"] < r["held_out"]["terms"][term]["rmse_without"], joint
             assert r["later_rmse"] <= r["later_rmse_without"][term], (joint, term)
         assert not any(t["named"] for name, t in r["held_out"]["terms"].items() if name not in r["missing_physics"])
+    # every stator sensor on both profiles (profile 60 when ../shared/data has it): a grown network that fits
+    # each profile's winding better than the one-node file, no drive heat (the motor's [hardware] has none)
+    net = result["paderborn_network"]
+    assert {"winding", "tooth", "yoke"} <= set(net["nodes"]) and "drive_heating" not in net["sources"]
+    for profile, errors in net["per_profile_rmse"].items():
+        assert set(errors) == {"winding", "tooth", "yoke"}
+        assert errors["winding"] < net["baseline_winding_rmse"][profile], profile
+    if "paderborn_envelope" in result:  # the file from profile 24 alone, used on profile 60
+        env = result["paderborn_envelope"]
+        assert env["outside"] and env["quantities"]["ambient_c"]["outside"] and "never identified" in env["message"]
+        assert env["rmse_written"] <= env["rmse_packaged"]
+    assert (tmp_path / "paderborn_network_graph.png").stat().st_size > 10_000
     assert "identified on first 75 %" in text
     assert (tmp_path / "paderborn_later.png").stat().st_size > 10_000

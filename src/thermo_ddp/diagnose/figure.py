@@ -80,3 +80,37 @@ def _shade(diagnosis, recording: str, ax) -> None:
         for k, m in enumerate(spans):
             ax.axvspan(m.start_s, m.end_s, color=color, alpha=0.2, lw=0, label=f"{meaning} ({len(spans)})" if k == 0
                        else None)
+
+
+def draw_network(spec, ax, sensors=()) -> None:
+    """Draw a thermal network (:class:`~thermo_ddp.model.network_spec.NetworkSpec`) on ``ax`` as a graph:
+    its nodes (capacity; measured ones, ``sensors``, filled), its links (resistance) and the heat sink, and
+    each heat source with its share at the nodes it heats."""
+    from ..model.network_spec import AMBIENT
+
+    names = spec.node_names
+    angle = np.linspace(np.pi * 0.9, np.pi * 0.1, len(names)) if len(names) > 1 else np.array([np.pi / 2])
+    where = {n: (1.6 * np.cos(a), 1.2 * np.sin(a)) for n, a in zip(names, angle)}  # an arc above the sink
+    where[AMBIENT] = (0.0, -1.2)
+    for link in spec.links:
+        (xa, ya), (xb, yb) = where[link.between[0]], where[link.between[1]]
+        ax.plot([xa, xb], [ya, yb], "-", color="0.4", lw=1.5, zorder=1)
+        ax.text((xa + xb) / 2, (ya + yb) / 2, f"{float(link.resistance_k_per_w):.3g} K/W", fontsize=8,
+                ha="center", va="center", bbox={"fc": "white", "ec": "none", "alpha": 0.8}, zorder=2)
+    for node in spec.nodes:
+        x, y = where[node.name]
+        measured = node.name in sensors
+        ax.scatter([x], [y], s=900, color="tab:blue" if measured else "white", edgecolors="tab:blue", zorder=3)
+        ax.text(x, y - 0.22, f"{node.name}\n{float(node.capacity_j_per_k):.3g} J/K" + ("\n(measured)" if measured else ""),
+                ha="center", va="top", fontsize=8, zorder=4)
+    ax.scatter([0.0], [-1.2], s=900, marker="s", color="0.85", edgecolors="0.3", zorder=3)
+    ax.text(0.0, -1.45, f"{AMBIENT} (sink)", ha="center", va="top", fontsize=8)
+    heated: dict[str, int] = {}
+    for src in spec.sources:
+        for node, share in src.split.items():
+            x, y = where[node]
+            k = heated[node] = heated.get(node, -1) + 1  # the k-th source of this node: one line further out
+            ax.annotate(f"{src.label} {100 * float(share):.0f} %", (x, y + 0.1), (x, y + 0.45 + 0.2 * k), fontsize=8,
+                        ha="center", color="tab:red", arrowprops={"arrowstyle": "->", "color": "tab:red"}, zorder=4)
+    ax.set(xlim=(-2.3, 2.3), ylim=(-1.8, 2.4))
+    ax.axis("off")

@@ -84,8 +84,8 @@ class NetworkDiagnosis(ThermalOutcome):
 
     def not_determinable(self) -> list[dict]:
         out = []
-        for p, (lo, hi) in self.final.uncertainty().items():
-            if self.final.relative_error(p) > 0.5 and not p.endswith("_w_s_per_rad"):
+        for p, (lo, hi) in self.final.undetermined().items():
+            if not p.endswith("_w_s_per_rad"):
                 out.append({"term": p, "reason": f"95 % interval {lo:.3g} to {hi:.3g}: not pinned down by these data",
                             "experiment": "recordings at other speeds, currents and coolant temperatures"})
         for alt in self.alternatives:

@@ -35,6 +35,9 @@ from .thermal_data import INPUT_ROWS, ThermalGrid
 
 log = logging.getLogger(__name__)
 MIN_NOISE_C = 0.02  # a sensor's reading is not trusted below 0.02 K (calibration and lag of a thermocouple)
+# A value whose standard error exceeds half of it (of its log for log-scaled values) is not pinned down by the
+# data (NetworkFit.pinned): no [uncertainty] interval, listed in the diagnosis' not_determinable instead.
+MAX_RELATIVE_ERROR = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,20 +183,33 @@ class NetworkFit:
         """The largest per-sensor RMSE in units of its noise."""
         return max(self.rmse(s) / self.noise_c[s] for s in self.per_sensor())
 
+    def interval(self, path: str) -> tuple[float, float]:
+        """95 % interval of ``path``'s value, within the physical range searched (log-normal for log-scaled)."""
+        f = next(f for f in self.free if f.path == path)
+        value, err = self.values[path], self.stderr.get(path, math.inf)
+        if f.log:
+            factor = math.exp(min(Z95 * err, 700.0))
+            lo, hi = value / factor, value * factor
+        else:
+            lo, hi = value - Z95 * err, value + Z95 * err
+        return max(lo, f.low), min(hi, f.high)
+
+    def pinned(self, path: str) -> bool:
+        """Whether the data pin ``path`` down: its relative standard error is at most :data:`MAX_RELATIVE_ERROR`
+        (a share's is relative to the whole share, 1: a share near 0 may be pinned down)."""
+        if ".split." in path:
+            return self.stderr.get(path, math.inf) <= MAX_RELATIVE_ERROR
+        return self.relative_error(path) <= MAX_RELATIVE_ERROR
+
     def uncertainty(self) -> dict[str, list[float]]:
-        """95 % interval of every fitted value with a finite one (the file's ``[uncertainty]``)."""
-        out = {}
-        for f in self.free:
-            value, err = self.values[f.path], self.stderr.get(f.path, math.inf)
-            if f.log:
-                factor = math.exp(min(Z95 * err, 700.0))
-                lo, hi = value / factor, value * factor
-            else:
-                lo, hi = value - Z95 * err, value + Z95 * err
-            lo, hi = max(lo, f.low), min(hi, f.high)  # within the physical range searched
-            if math.isfinite(hi - lo):  # a value the data do not pin down has no finite interval
-                out[f.path] = [lo, hi]
-        return out
+        """95 % interval of every fitted value the data pin down (the file's ``[uncertainty]``).  A value they do
+        not pin down has none: its interval would be the range searched, and any band drawn from it (validate's
+        ``band_k``) the spread of that range, not of what was learned (:meth:`undetermined` lists them)."""
+        return {f.path: list(self.interval(f.path)) for f in self.free if self.pinned(f.path)}
+
+    def undetermined(self) -> dict[str, tuple[float, float]]:
+        """The fitted values the data do not pin down, with their 95 % intervals within the range searched."""
+        return {f.path: self.interval(f.path) for f in self.free if not self.pinned(f.path)}
 
     def relative_error(self, path: str) -> float:
         """Standard error relative to the value (log-scaled: the standard error of log(value))."""
