@@ -18,6 +18,10 @@ from thermo_ddp.identify.thermal import FRICTION_KEYS
 from thermo_ddp.tasks.experiment import ExperimentSettings, design_experiment
 from thermo_ddp.tasks.experiment_motion import joint_bounds
 from thermo_ddp.identify.thermal import load_joint_parameters
+from thermo_ddp.studies.experiment_loop import experiment_stage, undetermined
+from thermo_ddp.studies.loop import LoopSettings, record_experiments, robot_parameters
+from thermo_ddp.tasks.experiment_motion import programme
+from thermo_ddp.testing.testbed import LOGGED_COLUMNS, PlantParameters, programmed
 from thermo_ddp.testing.testbed.truths import ThreeNodeTruth, run_inputs, run_programme
 
 HEAT = {"friction_heating", "drive_heating", "iron_losses", "copper_resistance"}
@@ -106,9 +110,56 @@ def test_designed_experiment_settles_drive_and_friction_heat_seen_only_while_mov
 
 def test_a_truth_with_nothing_missing_names_nothing():
     _, rec = passive("nothing_missing")
-    design = design_experiment([rec], settings=ExperimentSettings(progress=False))
+    before = diagnose_thermal(rec)
+    design = design_experiment([rec], settings=ExperimentSettings(progress=False), diagnosis=before)
     assert design.success and design.status == "nothing_undetermined" and design.targets == ()
     assert design.to_dict()["predicted_separation_k"] == {} and design.to_dict()["duration_s"] == 0.0
+    # the loop's stage runs nothing on the robot and keeps the diagnosis
+    def never(run):
+        raise AssertionError("an experiment ran")
+    stage, sources = experiment_stage(PlantParameters(), [rec], before, ExperimentSettings(progress=False), never)
+    assert stage.run is None and stage.after is before and sources == [rec]
+    assert stage.to_dict()["ran"] is False and "nothing_undetermined" in stage.report_lines()[0]
+
+
+def test_the_testbed_elbow_runs_a_programme_at_its_current_and_speed():
+    """Oracles: the programme's own current and velocity, and the testbed's friction power F_c |v| + b v^2."""
+    plant = PlantParameters()
+    lo, hi, _ = joint_bounds(load_joint_parameters(None), 0.2)
+    rows = programme(60.0, np.array([0.0, 3.0, 3.0, 5.0, 0.0]), np.array([0.0, 0.0, 2.0, 0.5, 0.0]), (lo, hi),
+                     10.0, 0.1)
+    run = programmed(rows, params=plant, name="programme", seed=3)
+    truth = run.truth
+    k = np.searchsorted(rows["time_s"], truth.time_s, side="right") - 1
+    np.testing.assert_allclose(truth.current_a, rows["current_a"][k], atol=1e-9)
+    v = np.interp(truth.time_s, rows["time_s"], rows["velocity"])
+    np.testing.assert_allclose(run.columns["velocity"], v, atol=0.05)   # the sensor's noise
+    smooth = np.tanh(v / plant.coulomb_smoothing_rad_s)
+    power = np.abs((plant.viscous_friction_nm_s_per_rad * v + plant.coulomb_friction_nm * smooth) * v)
+    np.testing.assert_allclose(truth.friction_w, power, atol=1e-9)
+    assert truth.time_s[-1] <= rows["time_s"][-1] and truth.phases[-1][3] == pytest.approx(rows["time_s"][-1])
+
+
+@pytest.mark.slow
+def test_the_loop_stage_designs_runs_on_the_elbow_and_diagnoses_again():
+    """``thermo-ddp loop``'s stage on its robot (short recordings): the drive's and friction heat's values are
+    undetermined; the designed 15 min run under 84 °C on the robot's true winding; friction heat then within 40 %
+    of the robot's (F_c |v| + b v^2: c1 = F_c, c2 = b)."""
+    settings = LoopSettings.short(limits_c=(LIMIT_C,), heating_s=900.0, cooling_s=900.0, experiment_s=900.0)
+    robot = robot_parameters()
+    sources = [r.to_recording(LOGGED_COLUMNS) for r in record_experiments(robot, settings)]
+    before = diagnose_thermal(sources)
+    assert {"friction_heating", "drive_heating"} <= set(undetermined(before))
+    design = ExperimentSettings(duration_s=settings.experiment_s, limit_c=LIMIT_C, progress=False)
+    stage, more = experiment_stage(robot, sources, before, design, lambda run: run.to_recording(LOGGED_COLUMNS))
+    assert stage.design.designed and len(more) == len(sources) + 1
+    assert stage.true_peak_winding_c <= LIMIT_C and stage.run.time_s[-1] <= settings.experiment_s
+    assert {"friction_heating", "drive_heating"} <= set(stage.after.missing_physics)
+    fit = stage.after.final_fit.parameters
+    for key, true in zip(FRICTION_KEYS, (robot.coulomb_friction_nm, robot.viscous_friction_nm_s_per_rad)):
+        assert abs(fit[key] - true) <= 0.4 * true, (key, fit[key], true)
+    lines = stage.report_lines()
+    assert "true winding peak" in lines[0] and "diagnosed again" in lines[1] and json.dumps(stage.to_dict())
 
 
 def write_csv(rec, path):

@@ -68,7 +68,9 @@ def chain(tmp_path_factory):
         return save(fig, *args, **kwargs)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(Figure, "savefig", record)
-        table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True, columns=columns)
+        # the designed-experiment stage is off here: tests/test_experiment_design.py runs it on this robot
+        table = loop_files(out, short=True, limits_c=(LIMIT_C,), hold_s=20.0, oracle=True, columns=columns,
+                           experiment_s=None)
     return out, table
 
 
@@ -165,6 +167,7 @@ def test_chain_writes_recordings_models_figures_and_table(chain):
     for fig in ("loop.png", "loop_summary.png", "diagnosis.png"):
         assert (out / fig).stat().st_size > 10_000
     assert {r["model"] for r in table["rows"]} == {"original", "improved", "truth"}
+    assert table["experiment"] is None and not list(out.glob("experiment.*"))   # the stage was off
 
 
 def test_diagnosis_finds_the_robots_concealed_physics(chain):
@@ -250,6 +253,22 @@ def test_loop_refuses_a_column_map_it_cannot_log_by_before_any_work(tmp_path, ca
     assert main(["loop", "--short", "--out", str(tmp_path / "out"), "--columns", str(columns)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and str(columns) in err and all(w in err for w in words), err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("options, words", [
+    (["--experiment-s", "0"], ["experiment_s = 0.0", "(0, 86400]"]),
+    (["--experiment-s", "90000"], ["experiment_s = 90000.0", "(0, 86400]"]),
+    (["--experiment-s", "600", "--no-experiment"], ["not allowed with argument"]),
+])
+def test_loop_refuses_a_bad_experiment_duration_before_any_work(tmp_path, capsys, monkeypatch, options, words):
+    monkeypatch.setattr("thermo_ddp.studies.loop.record_experiments", lambda *a, **k: 1 / 0)
+    try:
+        code = main(["loop", "--short", "--out", str(tmp_path / "out"), *options])
+    except SystemExit as parser_exit:   # argparse's refusal of the two options together
+        code = parser_exit.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out").exists()
 
 

@@ -158,8 +158,9 @@ def design_parser() -> Parser:
 
 def loop_parser() -> Parser:
     from .studies.loop import SHORT_DEFAULTS, LoopSettings
-    cmd = Parser(prog="thermo-ddp loop", description="recordings -> identification -> diagnosis -> improved "
-                 "model -> plan -> closed loop, original vs improved model, on the simulated elbow")
+    cmd = Parser(prog="thermo-ddp loop", description="recordings -> diagnosis -> designed experiment (if anything "
+                 "is undetermined) -> diagnosis again -> improved model -> plan -> closed loop, original vs improved "
+                 "model, on the simulated elbow")
     cmd.add_argument("--out", default="loop_out", help="output folder (default %(default)s)")
     cmd.add_argument("--short", action="store_true",
                      help=f"flag: {SHORT_DEFAULTS['heating_s'] / 60:g}-minute experiments, a "
@@ -171,6 +172,12 @@ def loop_parser() -> Parser:
                      help=f"winding limits in °C (default {' '.join(f'{c:g}' for c in LoopSettings.limits_c)} °C)")
     cmd.add_argument("--no-oracle", action="store_true", help="flag: skip the run planned with the true parameters "
                                                               "(--short skips it anyway)")
+    stage = cmd.add_mutually_exclusive_group()
+    stage.add_argument("--experiment-s", type=number("s"), default=None,
+                     help=f"when the diagnosis leaves items undetermined, design an experiment of at most this long "
+                          f"(under the lowest limit), run it on the robot and diagnose again (default: "
+                          f"{LoopSettings.experiment_s:g} s; {SHORT_DEFAULTS['experiment_s']:g} s with --short)")
+    stage.add_argument("--no-experiment", action="store_true", help="flag: no designed experiment stage")
     cmd.add_argument("--columns", metavar="MAP.toml", help="column map: the robot logs its recordings in the map's own "
                                                            "column names and the chain reads them through it "
                                                            "(default: contract columns)")

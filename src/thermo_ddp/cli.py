@@ -83,10 +83,12 @@ def _loop(args, out: Outputs) -> Run:
         options["hold_s"] = args.hold_s
     if args.no_oracle:  # else the settings' default: with the true parameters, except --short
         options["oracle"] = False
+    if args.no_experiment or args.experiment_s is not None:
+        options["experiment_s"] = None if args.no_experiment else args.experiment_s
     table = loop_files(args.out, short=args.short, **options)
     report = (Path(args.out) / "loop.txt").read_text().rstrip("\n")
     files = f"  files in {args.out}/: loop.txt, loop.json, loop.png, loop_summary.png, diagnosis.json, diagnosis.png, " \
-            "models/*.toml, recordings/*.csv"
+            "experiment.json/.csv/.png, models/*.toml, recordings/*.csv"
     return Run(f"{report}\n{files}", {"success": table.get("success")}, stage=False)
 
 

@@ -7,17 +7,28 @@
 4. diagnose again with the new recording (the next round's first step).
 
 The loop ends when nothing is undetermined, when no experiment can be designed, or after ``rounds`` rounds.
+
+:func:`experiment_stage` is the same round on the elbow robot of ``thermo-ddp loop``
+(:mod:`thermo_ddp.studies.loop`): the testbed runs the programme
+(:func:`thermo_ddp.testing.testbed.programmed`) and the robot's log joins the recordings.
 """
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable
 
 import numpy as np
 
 from .._config import require
-from ..diagnose.thermal import diagnose_thermal
+from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..tasks.experiment import ExperimentDesign, ExperimentSettings, design_experiment
+from ..testing.testbed import PlantParameters, SimulatedRecording, programmed
 from ..testing.testbed.truths import ThreeNodeTruth, run_programme
+
+
+def undetermined(diagnosis: ThermalDiagnosis) -> tuple[str, ...]:
+    """The items a diagnosis leaves undetermined, each once."""
+    return tuple(dict.fromkeys(n["term"] for n in diagnosis.not_determinable))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,16 +80,68 @@ def close_the_loop(recordings, truth: ThreeNodeTruth, *, rounds: int = 2, settin
     diagnosis = diagnose_thermal(recs)
     for k in range(rounds):
         design = design_experiment(recs, settings=settings, diagnosis=diagnosis)
-        undetermined = tuple(dict.fromkeys(n["term"] for n in diagnosis.not_determinable))
         if not design.designed:
-            done.append(LoopRound(tuple(diagnosis.missing_physics), undetermined, design, None))
+            done.append(LoopRound(tuple(diagnosis.missing_physics), undetermined(diagnosis), design, None))
             break
         run, temps = run_programme(truth, design.programme(), rng, f"designed_{k + 1}", noise_c=noise_c,
                                    sample_s=sample_s)
-        done.append(LoopRound(tuple(diagnosis.missing_physics), undetermined, design, float(temps[:, 0].max())))
+        done.append(LoopRound(tuple(diagnosis.missing_physics), undetermined(diagnosis), design,
+                              float(temps[:, 0].max())))
         recs.append(run)
         diagnosis = diagnose_thermal(recs)
     failed = [r.design for r in done if not r.design.success]
     status = "failed" if failed or not diagnosis.success else "ok"
     message = failed[0].message if failed else diagnosis.message
     return ExperimentLoop(status == "ok", status, message, tuple(done), diagnosis)
+
+
+# ----------------------------------------------------------------------------- the stage of ``thermo-ddp loop``
+@dataclasses.dataclass(frozen=True)
+class ExperimentStage:
+    """The experiment stage of ``thermo-ddp loop``: the diagnosis of the report's recordings (``before``), the
+    design, the robot's run of it (None: nothing ran) and the diagnosis with its log (``after``; ``before``
+    when nothing ran)."""
+
+    before: ThermalDiagnosis
+    after: ThermalDiagnosis
+    design: ExperimentDesign
+    run: SimulatedRecording | None = None
+
+    @property
+    def true_peak_winding_c(self) -> float | None:
+        """The robot's true winding peak while it ran the experiment (the testbed's hidden truth)."""
+        return None if self.run is None else float(self.run.truth.winding_c.max())
+
+    def to_dict(self) -> dict:
+        return {"undetermined_before": list(undetermined(self.before)), "design": self.design.to_dict(),
+                "ran": self.run is not None, "duration_s": self.design.duration_s,
+                "true_peak_winding_c": self.true_peak_winding_c,
+                "named_after": list(self.after.missing_physics), "undetermined_after": list(undetermined(self.after))}
+
+    def report_lines(self) -> list[str]:
+        """What the stage did, in two lines: the design and the robot's run; what the diagnosis says with it."""
+        gaps = ", ".join(undetermined(self.before)) or "nothing"
+        d = self.design
+        if self.run is None:
+            return [f"experiment: undetermined {gaps}; {d.status}: {d.message}"]
+        return [f"experiment: undetermined {gaps}; designed {d.duration_s / 60:.0f} min for "
+                f"{', '.join(d.targets)} (current up to {d.current_a.max():.2f} A, speed up to "
+                f"{d.speed_rad_s.max():.2f} rad/s); the robot ran it: true winding peak {self.true_peak_winding_c:.1f}"
+                f" °C (predicted {d.peak_winding_c:.1f}, limit {d.limit_c:g} °C)",
+                f"  diagnosed again with it: missing physics {', '.join(self.after.missing_physics) or 'none'}; "
+                f"undetermined {', '.join(undetermined(self.after)) or 'nothing'}"]
+
+
+def experiment_stage(robot: PlantParameters, sources: list, diagnosis: ThermalDiagnosis,
+                     settings: ExperimentSettings, log_run: Callable[[SimulatedRecording], object],
+                     seed: int = 0) -> tuple[ExperimentStage, list]:
+    """Steps 2-4 on the testbed elbow ``robot`` after the diagnosis of ``sources``: design (if anything is
+    undetermined), run the programme on the robot, log it (``log_run`` returns what the diagnosis reads: a file),
+    diagnose again.  Returns the stage and the sources with the robot's log."""
+    design = design_experiment(sources, settings=settings, diagnosis=diagnosis)
+    if not design.designed:
+        return ExperimentStage(diagnosis, diagnosis, design), list(sources)
+    run = programmed(design.programme(), name="designed_experiment", params=robot, seed=seed)
+    sources = [*sources, log_run(run)]
+    after = diagnose_thermal(sources, settings=ThermalDiagnosisSettings(progress=settings.progress))
+    return ExperimentStage(diagnosis, after, design, run), sources

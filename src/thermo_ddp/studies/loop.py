@@ -47,6 +47,7 @@ from ..model.arm import ELBOW, PAYLOAD_KG, ArmSettings
 from ..diagnose.figure import plot_thermal_diagnosis
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
+from ..tasks.experiment import MAX_DURATION_S, ExperimentSettings, write_programme
 from ..tasks.limits import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
@@ -56,6 +57,7 @@ from ..testing.testbed import (COLUMNS, LOGGED_COLUMNS, Ambient, PlantParameters
                       static_4a, winding_pulses)
 from ..model.thermal import HeatSource, ThermalNetwork, network_from_parameters
 from .._progress import hidden
+from .experiment_loop import ExperimentStage, experiment_stage
 from ..outputs import check_output_folder, write_folder_atomically
 from ..recordings import ColumnMap, load_column_map, read_recordings
 
@@ -63,9 +65,9 @@ log = logging.getLogger(__name__)
 _SRC = "loop"
 MODELS = ("original", "improved")
 ORACLE = "truth"  # the robot's own parameter file as the planner's model: what perfect knowledge achieves
-# LoopSettings.short(): 30-minute experiments, a 45 s hold (still longer than the robot can hold 40 kg under
+# LoopSettings.short(): 30-minute experiments (and designed experiment), a 45 s hold (still longer than the robot can hold 40 kg under
 # 140 °C) and no oracle
-SHORT_DEFAULTS = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False}
+SHORT_DEFAULTS = {"hold_s": 45.0, "heating_s": 1800.0, "cooling_s": 1800.0, "oracle": False, "experiment_s": 1800.0}
 
 
 # ----------------------------------------------------------------------------- settings
@@ -78,6 +80,11 @@ class LoopSettings:
     task, lift + hold + lower + settle; a shorter window cannot plan a hold that outlasts it, its
     terminal return constraint contradicts the hold band), sensor ``seed``. ``oracle``: also plan and
     execute with the robot's true parameter file (the best any identified model can do).
+
+    ``experiment_s``: when the diagnosis leaves items undetermined, the experiment designed to settle them
+    (:func:`~thermo_ddp.tasks.experiment.design_experiment`, at most this long, under the lowest of
+    ``limits_c``) runs on the robot and the diagnosis is repeated with its log
+    (:func:`~thermo_ddp.studies.experiment_loop.experiment_stage`); None: no experiment stage.
 
     ``pulse_test``: also record :func:`~thermo_ddp.testing.testbed.winding_pulses` (not in the report), which
     excites the winding's time constant. ``voltage``: the robot logs its motor voltage; the
@@ -97,6 +104,7 @@ class LoopSettings:
     oracle: bool = True
     pulse_test: bool = True
     voltage: bool = True
+    experiment_s: float | None = 3600.0
     progress: bool | None = None
 
     def __post_init__(self):
@@ -109,6 +117,9 @@ class LoopSettings:
             value = getattr(self, name)
             require(isinstance(value, (int, float)) and math.isfinite(value) and value > 0, _SRC, name, value,
                     "expected a finite number > 0")
+        require(self.experiment_s is None or (isinstance(self.experiment_s, (int, float))
+                                              and 0 < self.experiment_s <= MAX_DURATION_S), _SRC, "experiment_s",
+                self.experiment_s, f"must be in (0, {MAX_DURATION_S:g}] s, or None for no experiment")
         require(self.heating_s >= 600 and self.cooling_s >= 600, _SRC, "heating_s/cooling_s",
                 (self.heating_s, self.cooling_s), "experiments need >= 600 s of heating and of cooling")
 
@@ -248,6 +259,7 @@ class LoopResult:
     improved_fit: ThermalFit
     model_files: dict[str, Path]
     executions: tuple[Execution, ...]
+    experiment: ExperimentStage | None = None   # None: the stage was off
 
     @property
     def success(self) -> bool:
@@ -292,6 +304,7 @@ class LoopResult:
                                  "stderr": dict(self.improved_fit.stderr), "notes": list(self.improved_fit.notes)},
                 "identified_vs_true": self.identified_vs_true(),
                 "model_files": {k: str(v) for k, v in self.model_files.items()},
+                "experiment": None if self.experiment is None else self.experiment.to_dict(),
                 "rows": self.rows(), "claims": self.claims()}
 
     def identified_vs_true(self) -> dict[str, dict[str, float | None]]:
@@ -315,7 +328,8 @@ class LoopResult:
 
     def report(self) -> str:
         d = self.to_dict()["diagnosis"]
-        return "\n".join([f"close the loop: {self.status}",
+        stage = self.experiment.report_lines() if self.experiment is not None else []
+        return "\n".join([f"close the loop: {self.status}", *stage,
                           f"diagnosis: {d['baseline_model']} -> {d['final_model']}, missing physics "
                           f"{', '.join(d['missing_physics']) or 'none'}, held-out rmse {d['rmse_before']:.3f} -> "
                           f"{d['rmse_after']:.3f} K", self.parameter_table(), self.table(),
@@ -386,13 +400,14 @@ def oracle_claim(improved: dict[str, Any], truth: dict[str, Any]) -> dict[str, A
             "improved_hold_share_of_oracle": share, "statement": text}
 
 
-def identify_models(recording_files, out_dir: Path,
-                    settings: LoopSettings) -> tuple[ThermalDiagnosis, ThermalFit, dict[str, Path]]:
+def identify_models(recording_files, out_dir: Path, settings: LoopSettings,
+                    diagnosis: ThermalDiagnosis | None = None) -> tuple[ThermalDiagnosis, ThermalFit, dict[str, Path]]:
     """Diagnose the recordings (contract CSV files, or recordings read through a column map); re-identify
     the diagnosed structure on every sample (:func:`refit`); write the ORIGINAL (identified one-node baseline,
     constant ambient, no friction heat) and IMPROVED (the re-identified diagnosed structure) parameter files
-    into ``out_dir``."""
-    diagnosis = diagnose_thermal(list(recording_files), settings=ThermalDiagnosisSettings(progress=settings.progress))
+    into ``out_dir``. ``diagnosis``: the recordings' diagnosis when already computed."""
+    diagnosis = diagnosis or diagnose_thermal(list(recording_files),
+                                              settings=ThermalDiagnosisSettings(progress=settings.progress))
     if not diagnosis.success:
         raise RunFailed("the loop's diagnosis", diagnosis.status, diagnosis.message)
     improved = refit(diagnosis, recording_files)
@@ -457,14 +472,23 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
     (out_dir / "recordings").mkdir(parents=True, exist_ok=True)
     robot = robot_parameters()
     cases = [(m, lim) for m in settings.models for lim in settings.limits_c]
-    with tqdm(total=2 + len(cases), desc="loop", unit="step", disable=hidden(settings.progress)) as bar:
+    stages = 3 + (settings.experiment_s is not None) + len(cases)
+    with tqdm(total=stages, desc="loop", unit="step", disable=hidden(settings.progress)) as bar:
         _stage(bar, "recording the experiments on the simulated robot")
         recordings = record_experiments(robot, settings)
         files = tuple(_log(r, out_dir / "recordings" / f"{r.name}.csv", logged_columns(settings), cmap)
                       for r in recordings)
-        sources = files if cmap is None else read_recordings(files, cmap).recordings
-        _stage(bar, "diagnosing and re-identifying", done=True)
-        diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings)
+        sources = list(files if cmap is None else read_recordings(files, cmap).recordings)
+        _stage(bar, "diagnosing", done=True)
+        diagnosis = diagnose_thermal(sources, settings=ThermalDiagnosisSettings(progress=settings.progress))
+        stage = None
+        if settings.experiment_s is not None and diagnosis.success:
+            _stage(bar, "designing the experiment, running it on the robot, diagnosing again", done=True)
+            stage, sources = _experiment(robot, sources, diagnosis, settings, out_dir, cmap)
+            diagnosis, recordings = stage.after, recordings + ((stage.run,) if stage.run else ())
+            files += (out_dir / "recordings" / f"{stage.run.name}.csv",) if stage.run else ()
+        _stage(bar, "re-identifying", done=True)
+        diagnosis, improved_fit, model_files = identify_models(sources, out_dir / "models", settings, diagnosis)
         save_parameters(truth_parameters(robot), out_dir / "models" / f"{ELBOW}_truth.toml")
         if settings.oracle:
             model_files[ORACLE] = out_dir / "models" / f"{ELBOW}_truth.toml"
@@ -474,7 +498,19 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
             _stage(bar, f"plan and closed loop: {model} model, {lim:g} °C", done=True)
             executions.append(_plan_and_execute(settings, plant_model, model_files[model], model, lim))
         bar.update()
-    return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions))
+    return LoopResult(settings, robot, recordings, files, diagnosis, improved_fit, model_files, tuple(executions),
+                      stage)
+
+
+def _experiment(robot, sources, diagnosis, settings: LoopSettings, out_dir: Path, cmap):
+    """The experiment stage (:func:`~thermo_ddp.studies.experiment_loop.experiment_stage`) under the lowest limit;
+    the robot logs the run into recordings/ as it logged the report's experiments."""
+    def log_run(run):
+        path = _log(run, out_dir / "recordings" / f"{run.name}.csv", logged_columns(settings), cmap)
+        return path if cmap is None else read_recordings([path], cmap).recordings[0]
+    design = ExperimentSettings(duration_s=settings.experiment_s, limit_c=min(settings.limits_c),
+                                progress=settings.progress)
+    return experiment_stage(robot, sources, diagnosis, design, log_run, seed=settings.seed)
 
 
 def _stage(bar, what: str, done: bool = False) -> None:
@@ -505,7 +541,8 @@ def _log(recording: SimulatedRecording, path: Path, logged: tuple[str, ...], cma
 def loop_files(out_dir: str | Path, *, short: bool = False, columns: str | Path | None = None,
                **options) -> dict[str, Any]:
     """CLI entry (``thermo-ddp loop``): run the chain, write into ``out_dir`` the recordings
-    (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth),
+    (recordings/*.csv), the parameter files (models/*.toml: original, improved and the hidden truth), the
+    designed experiment (experiment.json; experiment.csv and experiment.png when one was designed),
     the diagnosis (diagnosis.json, diagnosis.png), the figures (loop.png, loop_summary.png), the table (loop.json)
     and the report (loop.txt); return the table.
 
@@ -528,6 +565,11 @@ def _write_loop(settings: LoopSettings, folder: Path, final: Path, cmap: ColumnM
     plot_thermal_diagnosis(result.diagnosis, folder / "diagnosis.png")
     result.plot(folder / "loop.png")
     result.plot_summary(folder / "loop_summary.png")
+    if result.experiment is not None:
+        (folder / "experiment.json").write_text(json.dumps(result.experiment.design.to_dict(), indent=1))
+        if result.experiment.design.designed:
+            write_programme(result.experiment.design.programme(), folder / "experiment.csv")
+            result.experiment.design.plot(folder / "experiment.png")
     table = result.to_dict()
     def moved(path: str) -> str:
         return str(final / Path(path).relative_to(folder))

@@ -58,19 +58,21 @@ def plot_experiment(design, path) -> None:
     limit drawn."""
     from .._figures import new_figure
 
-    fig, axes = new_figure(3, 1, (9, 8), sharex=True)
+    fig, axes = new_figure(3, 1, (12, 8), sharex=True)
     t_min = design.time_s / 60.0
     axes[0].step(t_min[:-1], design.current_a, where="post", color="tab:blue")
     axes[0].set_ylabel("current [A]")
     axes[1].step(t_min[:-1], design.speed_rad_s, where="post", color="tab:green")
     axes[1].set_ylabel("speed [rad/s]")
     for k, label in enumerate(design.labels):
-        line, = axes[2].plot(t_min, design.sensor_c[:, k], label=f"sensor: {label}")
+        line, = axes[2].plot(t_min, design.sensor_c[:, k], label=label)
         axes[2].plot(t_min, design.winding_c[:, k], ls="--", color=line.get_color(), lw=0.8)
+    axes[2].plot([], [], ls="--", color="0.4", lw=0.8, label="dashed: the same explanation's winding")
     axes[2].axhline(design.limit_c, color="k", ls=":", label=f"winding limit {design.limit_c:g} °C")
-    axes[2].set_ylabel("temperature [°C] (dashed: winding)")
+    axes[2].set_ylabel("temperature [°C]\n(solid: sensor, dashed: winding)")
     axes[2].set_xlabel("time [min]")
-    axes[2].legend(fontsize=7, loc="best")
+    # beside the axes, never over the curves (the windings run up to the limit line)
+    axes[2].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     axes[0].set_title(f"designed experiment: {', '.join(design.targets)}")
     fig.tight_layout()
     fig.savefig(path, dpi=100)

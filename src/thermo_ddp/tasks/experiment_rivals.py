@@ -185,10 +185,11 @@ def _target(diagnosis, item: dict, reference: Rival) -> Target | None:
     return Target(term, item["reason"], tuple(rivals)) if rivals else None
 
 
-def _perturbed(target: Target, richest: Rival) -> Target:
-    """``target`` with the richest explanation's values of its term each raised by :data:`PERTURBATION`: telling
-    them apart is seeing that value to the precision the diagnosis asks of a named parameter."""
-    keys = [k for k in term_keys(target.term, richest.terms) if richest.values.get(k, 0.0) > 0]
+def _perturbed(target: Target, richest: Rival, free: tuple[str, ...]) -> Target:
+    """``target`` with the richest explanation's values of its term (those ``free`` in the common structure) each
+    raised by :data:`PERTURBATION`: telling them apart is seeing that value to the precision the diagnosis asks
+    of a named parameter."""
+    keys = [k for k in term_keys(target.term, richest.terms) if k in free and richest.values.get(k, 0.0) > 0]
     extra = tuple(Rival(f"{richest.label} ({k} +{100 * PERTURBATION:.0f} %)", richest.terms,
                         dict(richest.values) | {k: richest.values[k] * (1 + PERTURBATION)}, True) for k in keys)
     return dataclasses.replace(target, rivals=target.rivals + extra)
@@ -214,7 +215,7 @@ def explanations(diagnosis) -> Explanations:
     union = set(reference.terms).union(*(r.terms for t in targets for r in t.rivals))
     expl = Explanations(reference, tuple(targets), tuple(untargeted), _common_model(diagnosis.params, union))
     richest = expl.richest
-    return dataclasses.replace(expl, targets=tuple(_perturbed(t, richest) if t.term in richest.terms else t
+    return dataclasses.replace(expl, targets=tuple(_perturbed(t, richest, expl.model.keys) if t.term in richest.terms else t
                                                    for t in targets))
 
 

@@ -209,6 +209,44 @@ def winding_pulses(*, current_a: float = 8.0, pulse_s: float = 30.0, rest_s: flo
                    start, details)
 
 
+def programmed(programme, *, name: str = "programme", sample_rate_hz: float | None = None, seed: int = 0,
+               params: PlantParameters | None = None, sensors: SensorSettings | None = None,
+               ambient: Ambient | None = None, start: str = "idle") -> SimulatedRecording:
+    """A programme (recording-format columns ``time_s``, ``current_a``, ``position``, ``velocity``: e.g. a
+    designed experiment) on the position-controlled elbow: it follows the programmed position and velocity (the
+    samples interpolated, the acceleration their slope) while an external load (a brake, a spring) takes the torque
+    that makes the motor current the programmed one.  One phase per span of constant programmed current."""
+    params = params or PlantParameters()
+    t, current = (np.asarray(programme[c], float) for c in ("time_s", "current_a"))
+    q, v = (np.asarray(programme[c], float) for c in ("position", "velocity"))
+    require(t.size >= 2 and bool(np.all(np.diff(t) > 0)), name, "time_s", t.size, "expected increasing times")
+    a = np.gradient(v, t)
+    edges = np.flatnonzero(np.diff(current) != 0) + 1
+    starts, ends = np.r_[0, edges], np.r_[edges, t.size - 1]
+    phases = [_programme_phase(params, t, q, v, a, float(current[i]), i, j, k)
+              for k, (i, j) in enumerate(zip(starts, ends)) if t[j] > t[i]]
+    return _record(name, Profile(tuple(phases)), params, ambient, sensors, sample_rate_hz,
+                   np.random.default_rng(seed), seed, start, {"programme_rows": int(t.size)})
+
+
+def _programme_phase(params: PlantParameters, t, q, v, a, current_a: float, i: int, j: int, k: int) -> Phase:
+    """Rows ``i``..``j`` of a programme as one phase at ``current_a`` (see :func:`programmed`)."""
+    t0 = float(t[i])
+
+    def motion(local):
+        x = np.asarray(local, float) + t0
+        return np.interp(x, t, q), np.interp(x, t, v), np.interp(x, t, a)
+
+    free = Phase(f"programme_{k}", "moving", float(t[j] - t0), motion, max_step_s=0.5)
+    torque_per_a = params.gear_ratio * params.torque_constant_nm_per_a
+
+    def load_nm(local):
+        return (current_a - phase_mechanics(params, free, local).current_a) * torque_per_a
+
+    regime = "moving" if np.any(np.abs(v[i:j + 1]) > 0) else "static"
+    return dataclasses.replace(free, regime=regime, external_nm=load_nm)
+
+
 def random_recording(seed: int, effects: str = "random", experiment: str = "random",
                      heating_s: float | None = None, cooling_s: float | None = None,
                      params: PlantParameters | None = None) -> SimulatedRecording:
