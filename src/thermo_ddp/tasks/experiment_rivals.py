@@ -215,8 +215,8 @@ def explanations(diagnosis) -> Explanations:
     union = set(reference.terms).union(*(r.terms for t in targets for r in t.rivals))
     expl = Explanations(reference, tuple(targets), tuple(untargeted), _common_model(diagnosis.params, union))
     richest = expl.richest
-    return dataclasses.replace(expl, targets=tuple(_perturbed(t, richest, expl.model.keys) if t.term in richest.terms else t
-                                                   for t in targets))
+    return dataclasses.replace(expl, targets=tuple(_perturbed(t, richest, expl.model.keys)
+                                                   if t.term in richest.terms else t for t in targets))
 
 
 def _common_model(params, terms) -> ThermalModel:

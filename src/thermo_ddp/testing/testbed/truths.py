@@ -160,6 +160,30 @@ def random_case(seed: int, concealed: Sequence[str] | None = None) -> tuple[Reco
     return rec, truth
 
 
+# Issue 25's families of passive sessions that leave a heat term undetermined, and a truth with nothing missing:
+# (concealed terms, segments of (duration s, current A, speed rad/s)); the speed reverses every 10 s.
+FAMILIES = {
+    "friction_one_speed": (("friction_heating",), ((600, 0, 0), (2400, 3.5, 0), (2400, 3.0, 1.5), (2400, 0, 0))),
+    "both_only_moving": (("friction_heating", "drive_heating"), ((600, 0, 0), (3600, 3.0, 1.5), (3600, 0, 0))),
+    "friction_never_excited": (("friction_heating",), ((600, 0, 0), (3600, 3.5, 0), (3600, 0, 0))),
+    "nothing_missing": ((), ((600, 0, 0), (2400, 3.5, 0), (2400, 3.0, 1.5), (2400, 3.0, 0.5), (2400, 0, 0))),
+}
+
+
+def family_case(name: str, rng: np.random.Generator, truth: ThreeNodeTruth | None = None, noise_c: float = 0.05,
+                sample_s: float = 2.0) -> tuple[ThreeNodeTruth, Recording]:
+    """The passive session of the family ``name`` (:data:`FAMILIES`) on ``truth`` (default: the class values)
+    with the family's concealed terms; the current ripples by 5 % over a minute, in 10 mA steps."""
+    concealed, segments = FAMILIES[name]
+    truth = dataclasses.replace(truth or ThreeNodeTruth(), concealed=frozenset(concealed))
+    t = np.arange(0.0, sum(s[0] for s in segments), 1.0)
+    k = np.minimum(np.searchsorted(np.cumsum([s[0] for s in segments]), t, side="right"), len(segments) - 1)
+    current = np.array([s[1] for s in segments], float)[k] * (1 + 0.05 * np.sin(2 * np.pi * t / 60))
+    speed = np.array([s[2] for s in segments], float)[k] * np.sign(np.sin(2 * np.pi * t / 20.0) + 1e-9)
+    rec, _ = run_inputs(truth, rng, t, np.round(current, 2), speed, name, noise_c=noise_c, sample_s=sample_s)
+    return truth, rec
+
+
 # ----------------------------------------------------------------------------- multi-sensor network truths
 NETWORK_FAMILIES = ("chain3", "chain3_iron", "rotor4_iron")
 _LINKS_K_PER_W = {"winding-tooth": 0.03, "tooth-yoke": 0.02, "yoke-ambient": 0.015, "rotor-tooth": 0.08,
