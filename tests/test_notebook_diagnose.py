@@ -19,3 +19,10 @@ def test_diagnose_notebook_runs_and_finds_friction_and_drive_heating(tmp_path, m
     assert improved["drive_idle_w"] > 1.0 and improved.model in ("one_node", "two_node_drive")
     assert (tmp_path / "diagnose_elbow.png").stat().st_size > 10_000
     assert os.environ["THERMO_DDP_NOTEBOOK_SHORT"] == "1"
+    # the side by side: the report's protocol and the designed experiment, same duration, under the 84 °C limit
+    side = json.loads((tmp_path / "experiment_side_by_side.json").read_text())
+    assert set(side) == {"report's protocol", "designed"} and "design-experiment: designed" in text
+    durations = [s["duration_s"] for s in side.values()]
+    assert max(durations) <= 1200.0 and max(durations) - min(durations) <= 10.0
+    assert all(s["peak_winding_c"] <= 84.0 for s in side.values())
+    assert (tmp_path / "experiment_side_by_side.png").stat().st_size > 10_000
