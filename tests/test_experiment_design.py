@@ -151,7 +151,8 @@ def test_the_loop_stage_designs_runs_on_the_elbow_and_diagnoses_again():
     for key, true in zip(FRICTION_KEYS, (robot.coulomb_friction_nm, robot.viscous_friction_nm_s_per_rad)):
         assert abs(fit[key] - true) <= 0.4 * true, (key, fit[key], true)
     lines = stage.report_lines()
-    assert "true winding peak" in lines[0] and "diagnosed again" in lines[1] and json.dumps(stage.to_dict())
+    assert "designed 15 min" in lines[0] and "true winding peak" in lines[1] and "diagnosed again" in lines[2]
+    assert json.dumps(stage.to_dict())
 
 
 def write_csv(rec, path):

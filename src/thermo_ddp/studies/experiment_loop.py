@@ -119,15 +119,15 @@ class ExperimentStage:
                 "named_after": list(self.after.missing_physics), "undetermined_after": list(undetermined(self.after))}
 
     def report_lines(self) -> list[str]:
-        """What the stage did, in two lines: the design and the robot's run; what the diagnosis says with it."""
+        """What the stage did: the design, the robot's run, what the diagnosis says with it (one line: no run)."""
         gaps = ", ".join(undetermined(self.before)) or "nothing"
         d = self.design
         if self.run is None:
             return [f"experiment: undetermined {gaps}; {d.status}: {d.message}"]
-        return [f"experiment: undetermined {gaps}; designed {d.duration_s / 60:.0f} min for "
-                f"{', '.join(d.targets)} (current up to {d.current_a.max():.2f} A, speed up to "
-                f"{d.speed_rad_s.max():.2f} rad/s); the robot ran it: true winding peak {self.true_peak_winding_c:.1f}"
-                f" °C (predicted {d.peak_winding_c:.1f}, limit {d.limit_c:g} °C)",
+        return [f"experiment: undetermined {gaps}; designed {d.duration_s / 60:.0f} min for {', '.join(d.targets)} "
+                f"(current up to {d.current_a.max():.2f} A, speed up to {d.speed_rad_s.max():.2f} rad/s)",
+                f"  the robot ran it: true winding peak {self.true_peak_winding_c:.1f} °C (the design's bound "
+                f"{d.peak_winding_c:.1f} °C, limit {d.limit_c:g} °C)",
                 f"  diagnosed again with it: missing physics {', '.join(self.after.missing_physics) or 'none'}; "
                 f"undetermined {', '.join(undetermined(self.after)) or 'nothing'}"]
 
