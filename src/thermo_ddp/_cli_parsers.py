@@ -174,9 +174,10 @@ def loop_parser() -> Parser:
                                                               "(--short skips it anyway)")
     stage = cmd.add_mutually_exclusive_group()
     stage.add_argument("--experiment-s", type=number("s"), default=None,
-                     help=f"when the diagnosis leaves items undetermined, design an experiment of at most this long "
-                          f"(under the lowest limit), run it on the robot and diagnose again (default: "
-                          f"{LoopSettings.experiment_s:g} s; {SHORT_DEFAULTS['experiment_s']:g} s with --short)")
+                       help=f"when the diagnosis leaves items undetermined, design an experiment of at most this "
+                            f"long (under the lowest limit, at most the file's cut-off), run it on the robot and "
+                            f"diagnose again (default: {LoopSettings.experiment_s:g} s; "
+                            f"{SHORT_DEFAULTS['experiment_s']:g} s with --short)")
     stage.add_argument("--no-experiment", action="store_true", help="flag: no designed experiment stage")
     cmd.add_argument("--columns", metavar="MAP.toml", help="column map: the robot logs its recordings in the map's own "
                                                            "column names and the chain reads them through it "

@@ -48,7 +48,8 @@ from ..diagnose.figure import plot_thermal_diagnosis
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
 from ..identify.thermal import ThermalFit, identify_thermal, parameter_file
 from ..tasks.experiment import MAX_DURATION_S, ExperimentSettings, write_programme
-from ..tasks.limits import HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, joint_limit_c
+from ..tasks.limits import (HOLD_S, MAX_LIMITS, check_fields, check_idle_below_limits, check_limit_c, default_limit_c,
+                            joint_limit_c)
 from ..tasks.lift import LiftPlan, LiftSettings, plan_lift
 from ..mpc import ClosedLoopResult, MPCSettings, run_closed_loop
 from ..model.parameters import (JointParameters, load_parameters, packaged_parameter_file, parameters_from_dict,
@@ -83,7 +84,7 @@ class LoopSettings:
 
     ``experiment_s``: when the diagnosis leaves items undetermined, the experiment designed to settle them
     (:func:`~thermo_ddp.tasks.experiment.design_experiment`, at most this long, under the lowest of
-    ``limits_c``) runs on the robot and the diagnosis is repeated with its log
+    ``limits_c`` and the elbow file's cut-off) runs on the robot and the diagnosis is repeated with its log
     (:func:`~thermo_ddp.studies.experiment_loop.experiment_stage`); None: no experiment stage.
 
     ``pulse_test``: also record :func:`~thermo_ddp.testing.testbed.winding_pulses` (not in the report), which
@@ -503,12 +504,14 @@ def run_loop(settings: LoopSettings | None = None, out_dir: str | Path | None = 
 
 
 def _experiment(robot, sources, diagnosis, settings: LoopSettings, out_dir: Path, cmap):
-    """The experiment stage (:func:`~thermo_ddp.studies.experiment_loop.experiment_stage`) under the lowest limit;
-    the robot logs the run into recordings/ as it logged the report's experiments."""
+    """The experiment stage (:func:`~thermo_ddp.studies.experiment_loop.experiment_stage`) under the lowest limit,
+    never above the elbow file's cut-off (an identification run is not a lift: it must not trip the robot's
+    cut-off); the robot logs the run into recordings/ as it logged the report's experiments."""
     def log_run(run):
         path = _log(run, out_dir / "recordings" / f"{run.name}.csv", logged_columns(settings), cmap)
         return path if cmap is None else read_recordings([path], cmap).recordings[0]
-    design = ExperimentSettings(duration_s=settings.experiment_s, limit_c=min(settings.limits_c),
+    cutoff = default_limit_c(load_parameters(packaged_parameter_file(ELBOW)))
+    design = ExperimentSettings(duration_s=settings.experiment_s, limit_c=min(*settings.limits_c, cutoff),
                                 progress=settings.progress)
     return experiment_stage(robot, sources, diagnosis, design, log_run, seed=settings.seed)
 
