@@ -70,7 +70,7 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
     problem = planner_ocp(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
-                                  settings.controller.motion_weight)
+                          settings.controller.motion_weight)
     return dataclasses.replace(lp, problem=problem)
 
 
@@ -92,7 +92,7 @@ def free_present(params: np.ndarray, layout) -> np.ndarray:
 
 
 def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
-                        motion_weight: float = 0.0) -> OptimalControlProblem:
+                motion_weight: float = 0.0) -> OptimalControlProblem:
     """The lift OCP as the receding-horizon planner solves it: the winding's back-off made soft when
     ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when ``motion_weight`` > 0 (hard:
     moved from x_k to x_{k+1} = f(x_k, u_k, p_k), renamed ``<name>_next``).
@@ -150,8 +150,8 @@ def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
     the lift's tuned one: its pivot jump made re-solves near infeasibility fail more often in the robustness
     sweep) with the nonmonotone Armijo test over :data:`MPC_NONMONOTONE_MEMORY` iterates, the stopping rule of
     :data:`MPC_TOLERANCES`, capped at ``max_iterations`` per period."""
-    return DDPSettings(full_second_order=True, max_iterations=max_iterations, nonmonotone_memory=MPC_NONMONOTONE_MEMORY,
-                       **MPC_TOLERANCES)
+    return DDPSettings(full_second_order=True, max_iterations=max_iterations,
+                       nonmonotone_memory=MPC_NONMONOTONE_MEMORY, **MPC_TOLERANCES)
 
 
 # The line search accepts a full step that raises the merit a little after a decrease (DDPSettings.nonmonotone_memory,
@@ -182,7 +182,6 @@ def shifted_warm_start(result: SolverResult, problem: OptimalControlProblem, shi
 def mpc_solver(lp: LiftProblem, settings: MPCSettings):
     """The receding-horizon DDP of :func:`mpc_ddp_settings` on ``lp``."""
     return make_solver(lp, "ddp", mpc_ddp_settings(settings.controller.max_iterations))
-
 
 
 class RecedingHorizonController:
