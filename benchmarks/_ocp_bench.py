@@ -44,6 +44,20 @@ def timed_solves(solve, repeats: int) -> tuple[SolverResult, dict]:
                     "wall_max_s": max(walls), "solver_median_s": statistics.median(inner), "repeats": repeats}
 
 
+def timed_cpu(solve, repeats: int):
+    """``timed_solves`` plus the median process CPU time of a solve (steadier than wall time on a loaded machine)."""
+    cpu = []
+
+    def once():
+        start = time.process_time()
+        result = solve()
+        cpu.append(time.process_time() - start)
+        return result
+
+    result, timing = timed_solves(once, repeats)
+    return result, {**timing, "cpu_median_s": statistics.median(cpu)}
+
+
 def row(result: SolverResult, timing: dict, reference: SolverResult | None = None) -> dict:
     """One table row: timings, iterations (and DDP's passes and multiplier updates), final cost, max violation,
     status (and cost gap to a peer)."""

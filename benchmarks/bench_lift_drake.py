@@ -39,7 +39,6 @@ import dataclasses
 import importlib.metadata
 import logging
 import re
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -55,7 +54,7 @@ except ImportError:  # one line, no traceback: this benchmark has its own venv
                      "(creates .venv-drake with thermo-ddp and benchmarks/requirements-drake.txt)") from None
 
 from _common import write
-from _ocp_bench import row, timed_solves
+from _ocp_bench import row, timed_cpu
 from thermo_ddp.solvers import SolverResult
 from thermo_ddp.tasks.lift import LiftSettings, binding_constraints, build_lift_problem, initial_guess, make_solver
 
@@ -304,20 +303,6 @@ def agreement(lp, result: SolverResult, reference: SolverResult) -> dict:
     return {"cost_rel_diff_vs_ipopt": float(cost_rel), "same_feasibility": feasible(result) == feasible(reference),
             "same_binding": same_binding, "max_abs_diff_vs_ipopt": diff,
             "agrees": bool(cost_rel <= COST_RTOL and feasible(result) == feasible(reference))}
-
-
-def timed_cpu(solve, repeats: int):
-    """``timed_solves`` plus the median process CPU time of a solve (steadier than wall time on a loaded machine)."""
-    cpu = []
-
-    def once():
-        start = time.process_time()
-        result = solve()
-        cpu.append(time.process_time() - start)
-        return result
-
-    result, timing = timed_solves(once, repeats)
-    return result, {**timing, "cpu_median_s": statistics.median(cpu)}
 
 
 def bench_problem(spec: dict, repeats: int, knots_per_block: int, drake_solvers) -> dict:

@@ -180,8 +180,8 @@ def test_perturbed_model_with_unit_scales_is_the_model():
 
 
 def test_warm_start_moves_the_multipliers_one_knot_and_frees_the_present_states_rows():
-    """The controller's warm start: stage multipliers moved on one knot (last repeated), those of the hold band at
-    knot 0 (switched off on the measured state by the window) zero, the penalty capped."""
+    """The controller's warm start: stage multipliers moved on one knot (last repeated), those of the hold band and
+    the winding limit at knot 0 (switched off on the measured state by the window) zero, the penalty capped."""
     from thermo_ddp.mpc.controller import shifted_warm_start
     from thermo_ddp.solvers import SolverResult
     from thermo_ddp.solvers.kkt import constraint_rows
@@ -196,9 +196,9 @@ def test_warm_start_moves_the_multipliers_one_knot_and_frees_the_present_states_
                           multipliers={"constraints": lam, "terminal_constraints": np.ones(pr.n_terminal_constraints),
                                        "penalty": rho})
     warm = shifted_warm_start(result, pr, 1, penalty_max=1e6)
-    band = np.array(constraint_rows(pr)[0]) == "hold_band"
+    band = np.isin(constraint_rows(pr)[0], ("hold_band", "winding_limit"))
     moved = warm.multipliers["constraints"]
-    assert band.sum() == 2 and np.all(moved[0, band] == 0)
+    assert band.sum() == 3 and np.all(moved[0, band] == 0)
     np.testing.assert_array_equal(moved[0, ~band], lam[1, ~band])
     np.testing.assert_array_equal(moved[1:-1], lam[2:])
     np.testing.assert_array_equal(moved[-1], lam[-1])

@@ -148,12 +148,12 @@ def test_robustness_sweep_has_no_violation():
 
 
 def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back():
-    """A plant that runs hotter than planned (winding-casing resistance +11 %, less capacity, warm start): with
-    the back-off band hard the plan must shorten the hold further (6.0 s against 6.7 s soft; before the DDP's
-    per-constraint penalties, issue 23, its re-solves near the limit failed instead: >= 10 fallbacks, open-loop
-    current while lowering); with the band soft (the default), nearly every period is planned and the true limit
-    holds."""
-    from thermo_ddp.studies.sweep import CONTROLLER, OBSERVER
+    """A plant that runs hotter than planned (winding-casing resistance +11 %, less capacity, warm start), the
+    hold of the planner's model (the sweep's --nominal-plan): with the back-off band hard the re-solves near the
+    limit fail and the plan shortens the hold further (measured: 43 fallback periods, 7.0 s; soft: 8, 7.4 s);
+    with the band soft (the default), most periods are planned and the true limit holds. (With the sweep's robust
+    hold both bands plan 4.7 s without a fallback: the set's margin keeps the winding out of the band.)"""
+    from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER
 
     draw = dict(plant_thermal_scales=(("winding_capacity_j_per_k", 0.956), ("casing_capacity_j_per_k", 0.857),
                                       ("winding_casing_k_per_w", 1.114), ("casing_ambient_k_per_w", 1.023)),
@@ -161,21 +161,19 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
                 plant_initial_c=53.8, seed=6)
     results = {}
     for weight in (0.0, 1e4):
-        settings = MPCSettings.from_options(**CONTROLLER, **draw, backoff_weight_per_k2=weight)
+        settings = MPCSettings.from_options(**{**CONTROLLER, **NOMINAL_PLAN}, **draw, backoff_weight_per_k2=weight)
         results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
     hard, soft = results[0.0], results[1e4]
     fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
-    # the scenario does stress the hard band: a shorter hold, or (when the start's hold search verifies the full
-    # hold through a regularised restart, tasks/attempts.py) re-solves that fail near the limit
-    assert hard.hold_s[-1] < soft.hold_s[-1] or fallbacks[0.0] >= 10, (hard.message, fallbacks)
-    assert fallbacks[1e4] <= fallbacks[0.0] / 10, fallbacks
+    assert hard.hold_s[-1] < soft.hold_s[-1] and fallbacks[0.0] >= 10, (hard.message, fallbacks)
+    assert fallbacks[1e4] <= fallbacks[0.0] / 4, fallbacks
     assert soft.success and soft.margin_c > 0
 
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     """Careful motion in the planner (on by default) on the default plant, 15 % hotter than planned: its
     one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight), the winding limit binds
-    from x_1 on, so a measured speed against the phase's direction or near the stop does not make re-solves
+    from x_1 on (the window switches it off at x_0), so a measured speed against the phase's direction or near the stop does not make re-solves
     infeasible (16 of 165 periods fell back with the careful rows hard on x_0). The true winding stays under the
     limit; the executed approach to the stop is slow, the arm at rest at the end."""
     from thermo_ddp.tasks.limits import joint_range_rad
@@ -185,7 +183,7 @@ def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     assert r.settings.controller.careful_motion
     lp = planning_problem(r.settings, build_models(r.settings)[0])
     names, costs = {c.name for c in lp.problem.constraints}, {c.name for c in lp.problem.costs}
-    assert {"winding_limit_next", "hold_band"} <= names and not names & {"one_way", "stop_approach", "winding_limit"}
+    assert {"winding_limit", "hold_band"} <= names and not names & {"one_way", "stop_approach", "winding_limit_next"}
     assert {"one_way_penalty", "stop_approach_penalty", "winding_backoff"} <= costs
     hard = planning_problem(r.settings.replace(motion_weight=0.0), build_models(r.settings)[0])
     assert {"one_way_next", "stop_approach_next"} <= {c.name for c in hard.problem.constraints}

@@ -69,28 +69,42 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
-    problem = limit_on_next_state(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
-                                  settings.controller.motion_weight)
+    problem = planner_ocp(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
+                          settings.controller.motion_weight)
     return dataclasses.replace(lp, problem=problem)
 
 
-# Stage constraints on the state alone, moved from x_k to x_{k+1} in the receding-horizon planner.
-ON_NEXT_STATE = ("winding_limit", "stop_approach", "one_way")
+# Stage rows on the state alone that the window switches off at the measured present state x_0, which no control
+# can change (:func:`free_present`): the hold band (hold_flag 0) and the winding limit (limit_c at PRESENT_LIMIT_C).
+FREE_AT_PRESENT = ("hold_band", "winding_limit")
+PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
+ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (motion_weight 0): moved from x_k to x_{k+1}
 
 
-def limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
-                        motion_weight: float = 0.0) -> OptimalControlProblem:
-    """The lift OCP with the stage constraints of :data:`ON_NEXT_STATE` moved from x_k to
-    x_{k+1} = f(x_k, u_k, p_k) (renamed ``<name>_next``), the winding's back-off made soft when
-    ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when ``motion_weight`` > 0.
+def free_present(params: np.ndarray, layout) -> np.ndarray:
+    """The per-knot parameters ``params`` (the lift's layout) with the rows of :data:`FREE_AT_PRESENT` switched
+    off at knot 0 (a copy)."""
+    params = np.array(params, dtype=float)
+    layout.assign(params[:1], "hold_flag", 0.0)
+    layout.assign(params[:1], "limit_c", PRESENT_LIMIT_C)
+    return params
 
-    The set of constrained states is then x_1..x_N (x_N also by the terminal limit): the same as
-    the lift's except the measured present state x_0, which no control can change. Without this,
-    an estimate a few mK over the limit (plant mismatch during one period) makes every re-solve
-    infeasible at knot 0; with careful motion, so does a measured speed against the phase's direction or
-    near a stop (measured on the +15 % resistance plant at 84 °C: 16 fallback periods with them at x_0, 1
-    moved).
+
+def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
+                motion_weight: float = 0.0) -> OptimalControlProblem:
+    """The lift OCP as the receding-horizon planner solves it: the winding's back-off made soft when
+    ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when ``motion_weight`` > 0 (hard:
+    moved from x_k to x_{k+1} = f(x_k, u_k, p_k), renamed ``<name>_next``).
+
+    The state's rows never bind the measured present state x_0: the window switches off the winding limit and
+    the hold band there (:func:`free_present`), so the constrained states are x_1..x_N. Otherwise an estimate a
+    few mK over the limit (plant mismatch during one period) makes every re-solve infeasible at knot 0; with
+    careful motion, so does a measured speed against the phase's direction or near a stop (measured on the
+    +15 % resistance plant at 84 °C: 16 fallback periods with them at x_0, 1 moved). The winding limit stays on
+    x_k (its knot-0 row off) rather than on f(x_k, u_k): the same constrained states, without the composed
+    rows' second derivatives of the step in every knot's local model (bench_mpc_step: the fused backward knot
+    11,564 -> 7,608 instructions with careful motion).
 
     Soft back-off: the winding is held hard under the task's limit (the planning limit + ``backoff_c``) and
     the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
@@ -116,9 +130,9 @@ def limit_on_next_state(problem: OptimalControlProblem, backoff_c: float, backof
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"
             c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
-            if c.name == "winding_limit_next" and backoff_weight > 0:
-                costs.append(c.penalty(backoff_weight, "winding_backoff"))
-                c = c.shifted(backoff_c)
+        if c.name == "winding_limit" and backoff_weight > 0:
+            costs.append(c.penalty(backoff_weight, "winding_backoff"))
+            c = c.shifted(backoff_c)
         constraints.append(c)
     return dataclasses.replace(problem, costs=tuple(costs), constraints=tuple(constraints), name="lift_mpc")
 
@@ -134,12 +148,18 @@ MPC_TOLERANCES = {"tolerance": 1e-5, "constraint_tolerance": 1e-4}
 def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
     """Full-second-order DDP (the R(T) i^2 curvature is in the dynamics), the solver's default schedule (not
     the lift's tuned one: its pivot jump made re-solves near infeasibility fail more often in the robustness
-    sweep), the stopping rule of :data:`MPC_TOLERANCES`, capped at ``max_iterations`` per period."""
-    return DDPSettings(full_second_order=True, max_iterations=max_iterations, **MPC_TOLERANCES)
+    sweep) with the nonmonotone Armijo test over :data:`MPC_NONMONOTONE_MEMORY` iterates, the stopping rule of
+    :data:`MPC_TOLERANCES`, capped at ``max_iterations`` per period."""
+    return DDPSettings(full_second_order=True, max_iterations=max_iterations,
+                       nonmonotone_memory=MPC_NONMONOTONE_MEMORY, **MPC_TOLERANCES)
 
 
-# Stage rows switched off at the measured present state x_0 by the window (the hold band: hold_flag 0).
-FREE_AT_PRESENT = ("hold_band",)
+# The line search accepts a full step that raises the merit a little after a decrease (DDPSettings.nonmonotone_memory,
+# as the lift's searches). Measured on the loop's oracle row (tests/test_loop.py, 84 °C): monotone, the start's
+# cold probes of 11.4-12.6 s stopped at the 50-iteration cap without a verdict (11.3 s planned) and a re-solve at
+# t = 12.5 s ended on a failed line search, which cut the hold to 10.8 s (margin 2.08 K); over 3 iterates the
+# start plans 11.6 s, held to the end (0.59 K).
+MPC_NONMONOTONE_MEMORY = 3
 
 
 def shifted_warm_start(result: SolverResult, problem: OptimalControlProblem, shift: int = 1,
@@ -199,9 +219,8 @@ class RecedingHorizonController:
         task = self.task.with_hold(self.hold_s).params
         n = self.lp.problem.horizon + 1
         rows = task[k:k + n]
-        window = np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)])
         layout = self.lp.problem.parameters
-        window[0, layout.slice("hold_flag")] = 0.0  # no hold band on the measured present state
+        window = free_present(np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)]), layout)
         if self.ambient_c is not None:
             layout.assign(window, "ambient_c", self.ambient_c)
         return window
@@ -237,6 +256,7 @@ class RecedingHorizonController:
             ladder = SolverLadder(lp.problem, self.solver)
 
             def probe(task, warm):  # DDP and its restarts: a real-time loop does not fall back to IPOPT
+                task = dataclasses.replace(task, params=free_present(task.params, task.problem.parameters))
                 return ladder.solve(task, warm or initial_guess(task), reference=False)
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
             search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s),

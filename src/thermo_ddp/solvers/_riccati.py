@@ -233,8 +233,13 @@ def gradient_step(ops, model, a, K, u, lb, ub, has_box):
     """The first-order part of :func:`backward_step` with given feedback gains ``K``: the value
     gradient a = lx + A'a' + K'Qu0 and the projected stationarity |Qu0| (no second derivatives)."""
     Qu0 = model["lu"] + model["B"].T @ a
-    a_new = model["lx"] + model["A"].T @ a + K.T @ Qu0
-    return a_new, _stationarity(ops, Qu0, u, lb, ub, has_box)
+    return first_order_step(ops, model["lx"] + model["A"].T @ a, Qu0, K, u, lb, ub, has_box)
+
+
+def first_order_step(ops, Lx, Qu0, K, u, lb, ub, has_box):
+    """:func:`gradient_step` from Lx = lx + A'a and Qu0 = lu + B'a (e.g. one reverse sweep of the knot's
+    Lagrangian l + a'f, without the Jacobians A, B)."""
+    return Lx + K.T @ Qu0, _stationarity(ops, Qu0, u, lb, ub, has_box)
 
 
 def _stationarity(ops, Qu0, u, lb, ub, has_box):

@@ -24,15 +24,16 @@ KNOT_FUNCTION(ddp_local_knot)
 KNOT_FUNCTION(ddp_local_eval_knot)
 KNOT_FUNCTION(ddp_back_knot)
 KNOT_FUNCTION(ddp_back_terminal)
-KNOT_FUNCTION(ddp_grad_knot)
+KNOT_FUNCTION(ddp_grad_first_knot)
 KNOT_FUNCTION(ddp_fwd_knot)
 KNOT_FUNCTION(ddp_eval_knot)
 KNOT_FUNCTION(ddp_terminal)
 const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 
 /* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
- * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and
- * ddp_grad_knot(a, model, u, policy); ddp_local_eval_knot(x, u, p, lam, rho, x_next): the same and the
+ * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess);
+ * ddp_grad_first_knot(a, x, u, p, lam, rho, policy): the first-order step from the first derivatives alone;
+ * ddp_local_eval_knot(x, u, p, lam, rho, x_next): the same and the
  * knot's cost, g and gap (the first pass).
  * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
  * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
@@ -88,7 +89,7 @@ static size_t nnz(const casadi_int *sp) {
 }
 
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_policy, int pivot) {
-    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
+    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_first_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
@@ -267,12 +268,11 @@ int ddp_gradient(Work *W, int N, const double *X, const double *U, const double 
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        rc = local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
-        if (rc) break;
-        W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = W->model;
-        W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = policy + (size_t)t * W->n_policy;
+        W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = X + (size_t)t * W->nx;
+        W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np, W->arg[4] = Lam + (size_t)t * W->ng;
+        W->arg[5] = rho, W->arg[6] = policy + (size_t)t * W->n_policy;
         W->res[0] = costates + (size_t)t * W->nx, W->res[1] = &knot_stat;
-        rc = ddp_grad_knot(W->arg, W->res, W->iw, W->w, 0);
+        rc = ddp_grad_first_knot(W->arg, W->res, W->iw, W->w, 0);
         *stat = knot_stat > *stat ? knot_stat : *stat;
     }
     return rc;
