@@ -52,19 +52,22 @@ def violation(G, GN) -> float:
 @dataclasses.dataclass(frozen=True)
 class Update:
     """One multiplier update: the largest penalty of the violated rows (of all rows when none is) and the
-    largest violation there, and whether the inner loop before it had converged (only those count as
-    evidence of infeasibility)."""
+    largest violation there, whether the inner loop before it had converged (only those count as evidence of
+    infeasibility), and every row's penalty and violation (the evidence is per row: rows in degC, V and rad do
+    not compare)."""
 
     penalty: float
     violation: float
     converged: bool
+    row_penalties: np.ndarray | None = None
+    row_violations: np.ndarray | None = None
 
     @staticmethod
     def at(settings, G, GN, rho, converged: bool) -> "Update":
         rows = row_violation(G, GN)
         violated = rows > settings.constraint_tolerance
         penalty = np.max(rho[violated]) if violated.any() else np.max(rho, initial=0.0)
-        return Update(float(penalty), float(np.max(rows, initial=0.0)), converged)
+        return Update(float(penalty), float(np.max(rows, initial=0.0)), converged, np.array(rho, float), rows)
 
 
 def update(settings, G, GN, lam, lamN, rho, viol_prev):
@@ -82,13 +85,24 @@ def update(settings, G, GN, lam, lamN, rho, viol_prev):
 
 
 def stalled(settings, log: list[Update]) -> bool:
-    """True when the last update followed a converged inner loop and, since a converged one at a penalty
-    ``infeasibility_growth`` times smaller, the violation has not halved: more penalty no longer buys
-    feasibility (a local infeasibility certificate)."""
+    """True when the last update followed a converged inner loop and some row's violation has not halved since a
+    converged one at which that row's penalty was ``infeasibility_growth`` times smaller: more penalty no longer
+    buys that row's feasibility (a local infeasibility certificate). Measured on a lift probe (37.5 kg, 73.7 °C):
+    the largest violation of all rows against the largest penalty of the violated ones certified a hold that is
+    feasible (a hold-band row at its first penalty, in rad, against the winding row's grown one)."""
     last = log[-1]
-    earlier = [u.violation for u in log if u.converged and u.penalty * settings.infeasibility_growth <= last.penalty]
-    return (last.converged and bool(earlier) and last.violation > 0.5 * earlier[-1]
-            and last.violation > 10 * settings.constraint_tolerance)
+    if not (last.converged and last.violation > 10 * settings.constraint_tolerance):
+        return False
+    if last.row_penalties is None:  # scalar evidence only
+        earlier = [u.violation for u in log if u.converged and u.penalty * settings.infeasibility_growth <= last.penalty]
+        return bool(earlier) and last.violation > 0.5 * earlier[-1]
+    reference = np.full(last.row_violations.shape, np.inf)
+    for u in log[:-1]:
+        if u.converged and u.row_penalties is not None:
+            grown = u.row_penalties * settings.infeasibility_growth <= last.row_penalties
+            reference = np.where(grown, u.row_violations, reference)
+    stuck = (last.row_violations > 0.5 * reference) & (last.row_violations > 10 * settings.constraint_tolerance)
+    return bool(np.any(stuck & np.isfinite(reference)))
 
 
 def certificate(settings, rows, G, GN, log: list[Update]) -> dict:
