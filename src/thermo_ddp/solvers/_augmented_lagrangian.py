@@ -94,7 +94,8 @@ def stalled(settings, log: list[Update]) -> bool:
     if not (last.converged and last.violation > 10 * settings.constraint_tolerance):
         return False
     if last.row_penalties is None:  # scalar evidence only
-        earlier = [u.violation for u in log if u.converged and u.penalty * settings.infeasibility_growth <= last.penalty]
+        growth = settings.infeasibility_growth
+        earlier = [u.violation for u in log if u.converged and u.penalty * growth <= last.penalty]
         return bool(earlier) and last.violation > 0.5 * earlier[-1]
     reference = np.full(last.row_violations.shape, np.inf)
     for u in log[:-1]:
