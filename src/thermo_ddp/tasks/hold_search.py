@@ -234,10 +234,10 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
     (:meth:`_Search.unconfirmed`). A probe without a verdict stops the search (``failed``), or with
     ``stop_without_verdict`` off (a controller that needs some verified plan) counts as not feasible: the
     search goes on to shorter holds, and the result is then the longest hold verified feasible, not a verdict
-    on longer ones."""
+    on longer ones (so nothing is confirmed: a real-time review spends no solve on it)."""
     search, top = _Search(lp, solve), lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
-    while hi - lo > 1 or search.unconfirmed(lo, hi):
+    while hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi)):
         confirm = hi - lo <= 1
         guided = len(search.probes) < GUIDED_PROBES
         knots = hi if confirm else int(np.clip(guess, lo + 1, hi - 1)) if guided else (lo + hi) // 2
