@@ -8,8 +8,9 @@ replayed with the hold stretched or cut (what the optimiser does on the lift, th
 prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
 does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
 on the same side twice the probes gallop (steps doubling); bisection takes over after
-:data:`GUIDED_PROBES` probes. The default 40 kg searches take 3 solves (was 6 at 84 °C and 4 at 140 °C by
-galloping and bisection; benchmarks/README.md).
+:data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
+hold's plan stretched (solved again when it came from another start). The default 40 kg searches take 4 solves
+at 84 °C (one confirms the boundary) and 3 at 140 °C (6 and 4 by galloping and bisection; benchmarks/README.md).
 """
 from __future__ import annotations
 
