@@ -57,6 +57,27 @@ def test_infeasibility_needs_converged_inner_loops():
     assert cert == {"penalty": [100.0, 100.0 * growth], "violation": [1.0, 0.9], "constraints": ["a", "b", "end"]}
 
 
+def test_infeasibility_evidence_is_per_row():
+    """A certificate needs the largest violation not halving as the penalty grows and a row whose own penalty
+    grew infeasibility_growth times without its own violation halving: either alone certified a lift probe one
+    knot past the longest hold that IPOPT and DDP then solve feasible (benchmarks/README.md)."""
+    g = S.infeasibility_growth
+
+    def update(rho, viol):
+        return al.Update(max(rho), max(viol), True, np.array(rho, float), np.array(viol, float))
+
+    # row 0 falls to a tenth as its penalty grows; row 1, larger, is still at its first penalty
+    falling = [update([100, 100], [0.1, 0.13]), update([100 * g, 100], [0.01, 0.2])]
+    assert not al.stalled(S, falling)
+    assert al.stalled(S, [al.Update(100.0, 0.13, True), al.Update(100.0 * g, 0.2, True)])  # the scalar rule
+    assert al.stalled(S, [update([100, 100], [0.1, 0.13]), update([100 * g, 100], [0.08, 0.2])])  # row 0 stuck
+    assert not al.stalled(S, [update([100, 100], [0.1, 0.13]), update([10 * g, 100], [0.08, 0.2])])  # grew < g
+    # row 0 stuck at a tiny violation while the largest fell 0.13 -> 4.5e-5: progress, no certificate
+    assert not al.stalled(S, [update([100, 100], [1e-5, 0.13]), update([100 * g, 100], [4.5e-5, 1e-6])])
+    rows = al.Update.at(S, G, GN, np.array([1.0, 7.0, 99.0]), True)
+    np.testing.assert_array_equal(rows.row_violations, [0.2, 0.1, 0.05])
+
+
 def test_flat_rule_never_accepts_a_large_gradient():
     """A predicted decrease below rounding with |Qu| above flat_stationarity is no convergence: the toy is
     stopped at its first iterate by a huge decrement tolerance and must not report converged."""

@@ -43,3 +43,27 @@ def test_a_stretched_solution_lowers_where_the_probe_lowers(lift, shift):
     np.testing.assert_allclose(warm.xs[:, q], want.xs[:, q], atol=1e-12)
     np.testing.assert_allclose(warm.us, want.us, atol=1e-12)
     assert not warm.multipliers
+
+
+def test_the_boundary_verdict_is_confirmed_from_the_longest_holds_plan(lift, monkeypatch):
+    """A false infeasible verdict one knot past the longest hold (reached from a cold start, as on four random
+    requests, benchmarks/README.md) is solved again from the feasible neighbour's plan stretched, and the search
+    goes on past it. The oracle: feasible up to 42 knots, but 41 and 42 read infeasible unless warm-started
+    from the hold one knot shorter (each fake plan is filled with its hold, so its stretched copy says where
+    it came from)."""
+    from thermo_ddp.tasks import hold_search
+    from thermo_ddp.tasks.attempts import Outcome
+
+    def solve(probe, warm):
+        k = probe.hold_knots[1] - probe.hold_knots[0]
+        source = None if warm is None else warm.xs[0, 0]
+        feasible = k <= 40 or (k <= 42 and source == k - 1)
+        plan = types.SimpleNamespace(xs=np.full_like(lift.x0, k, shape=(lift.params.shape[0], lift.x0.size)),
+                                     us=np.full((lift.params.shape[0] - 1, 1), float(k)))
+        return Outcome(plan, "feasible" if feasible else "infeasible", ())
+
+    monkeypatch.setattr(hold_search, "_next_guess",
+                        lambda lp, knots, outcome, lo, hi, step: knots + 1 if outcome.feasible else 40)
+    search = hold_search.longest_feasible_hold(lift, solve, 42)
+    assert search.knots == 42 and search.probes[43][1].verdict == "infeasible"
+    assert sorted(search.probes) == [40, 41, 42, 43] and len(search.replaced) == 1  # 42 solved twice

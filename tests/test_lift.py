@@ -190,11 +190,13 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
     assert plan.motion.max_speed_near_stop_rad_s == pytest.approx(m.max_speed_near_stop_rad_s, abs=1e-6)
 
 
-def test_default_searches_take_three_solves_and_few_forward_passes(default_plan):
-    """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer in 3 complete
-    solves, with at most 1.5 forward passes (line-search trials) per DDP iteration over the whole search."""
+def test_default_searches_take_few_solves_and_few_forward_passes(default_plan):
+    """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer, the latter
+    solved from the former's plan stretched (at 84 °C the first infeasible verdict there came from an infeasible
+    probe's plan and is solved again: 4 solves; 140 °C: 3), with at most 1.5 forward passes (line-search trials)
+    per DDP iteration over the whole search."""
     work = default_plan.solver["work"]
-    assert default_plan.solver["solves"] <= 3 and default_plan.solver["attempts"] == ["ddp"]
+    assert default_plan.solver["solves"] <= 4 and default_plan.solver["attempts"] == ["ddp"]
     assert work["forward_passes"] <= 1.5 * work["iterations"]
 
 

@@ -26,8 +26,8 @@ Method (each part stated, as logged):
   at the previous update (at the first update of a cold start: of the initial guess's), and shrinks by
   sqrt(``penalty_factor``), not below ``penalty_init``, where it fell below a hundredth of it.
   "infeasible" only with a certificate: at two updates after converged inner loops, the penalty grew
-  ``infeasibility_growth`` times and the violation did not halve (an inner loop stopped by
-  ``inner_max_iterations`` is no evidence).
+  ``infeasibility_growth`` times and neither the largest violation nor the own violation of a row whose own
+  penalty grew that much halved (an inner loop stopped by ``inner_max_iterations`` is no evidence).
 - Local model of the AL terms: Gauss-Newton curvature rho Jg'Jg on the active rows (lam + rho g > 0) and, with
   ``active_margin`` > 0, on the rows with lam > 0 within ``active_margin`` (their own units) of g = 0: a full
   step across the kink of a row just short of it otherwise meets curvature rho the model did not have.
@@ -126,7 +126,7 @@ class DDPSettings:
     penalty_init: float = 100.0             # AL penalty rho at a cold start
     penalty_factor: float = 10.0
     penalty_max: float = 1e8
-    infeasibility_growth: float = 1e3       # "infeasible" if the violation has not halved while rho grew this much
+    infeasibility_growth: float = 1e3       # "infeasible": the violation not halved while rho grew this much
     active_margin: float = 0.0              # rows with lam > 0 within this of g = 0 get the penalty's curvature
     box_iterations: int = 8                 # projected-Newton steps per knot at most (nu > 1; see _riccati)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"

@@ -8,8 +8,9 @@ replayed with the hold stretched or cut (what the optimiser does on the lift, th
 prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
 does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
 on the same side twice the probes gallop (steps doubling); bisection takes over after
-:data:`GUIDED_PROBES` probes. The default 40 kg searches take 3 solves (was 6 at 84 °C and 4 at 140 °C by
-galloping and bisection; benchmarks/README.md).
+:data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
+hold's plan stretched (solved again when it came from another start). The default 40 kg searches take 4 solves
+at 84 °C (one confirms the boundary) and 3 at 140 °C (6 and 4 by galloping and bisection; benchmarks/README.md).
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ class HoldSearch:
     knots: int          # the longest feasible hold in knots; -1 when not even touching the goal is feasible
     probes: Mapping[int, tuple[object, Outcome]]
     failed: int | None = None   # the hold (knots) whose solves reached no verdict (the search stopped there)
+    replaced: tuple[Outcome, ...] = ()   # verdicts solved again (the boundary confirmed): counted, not used
 
     @property
     def best(self) -> tuple[object, Outcome]:
@@ -45,7 +47,7 @@ class HoldSearch:
 
     @property
     def results(self) -> list[SolverResult]:
-        return [r for _, o in self.probes.values() for r in o.results]
+        return [r for o in (*self.replaced, *(o for _, o in self.probes.values())) for r in o.results]
 
     @property
     def solve_s(self) -> float:
@@ -143,20 +145,21 @@ def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     return lo
 
 
-def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> WarmStart | None:
-    """The nearest solved probe's solution, a feasible one's stretched to ``knots``; the nearest feasible one
-    first, unless an infeasible one is nearer by more than a knot. Measured (46.1 kg, 127.6 °C): an infeasible
-    probe's solution stretched failed DDP's first passes (regularisation) twice, the ladder ended in IPOPT."""
+def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> tuple[int | None, WarmStart | None]:
+    """(the probe it comes from, the warm start): the nearest solved probe's solution, a feasible one's
+    stretched to ``knots``; the nearest feasible one first, unless an infeasible one is nearer by more than a
+    knot. Measured (46.1 kg, 127.6 °C): an infeasible probe's solution stretched failed DDP's first passes
+    (regularisation) twice, the ladder ended in IPOPT."""
     if not probes:
-        return None
+        return None, None
     feasible = [k for k, (_, o) in probes.items() if o.feasible]
     near = min(probes, key=lambda k: abs(k - knots))
     if feasible and abs(min(feasible, key=lambda k: abs(k - knots)) - knots) <= abs(near - knots) + 1:
         near = min(feasible, key=lambda k: abs(k - knots))
     problem, outcome = probes[near]
     if not outcome.feasible:  # its violated trajectory stretched has gaps full DDP's first passes cannot take
-        return WarmStart(outcome.result.xs, outcome.result.us)
-    return stretched_warm_start((problem, outcome.result), knots)
+        return near, WarmStart(outcome.result.xs, outcome.result.us)
+    return near, stretched_warm_start((problem, outcome.result), knots)
 
 
 def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int]:
@@ -174,41 +177,79 @@ def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int
     return (max(hi - step, 0) if hi > 0 else -1), hi
 
 
+class _Search:
+    """The probes of one search: hold (knots) -> (problem, outcome), and the probe each was warm-started from."""
+
+    def __init__(self, lp, solve: Callable[[object, WarmStart | None], Outcome]):
+        self.lp, self.solve = lp, solve
+        self.probes: dict[int, tuple[object, Outcome]] = {}
+        self.source: dict[int, int | None] = {}
+        self.replaced: list[Outcome] = []
+
+    def run(self, knots: int, source: int | None = None) -> Outcome:
+        """Solve the probe holding ``knots``, from probe ``source``'s plan stretched (default: the nearest)."""
+        probe = self.lp.with_hold(knots * self.lp.settings.dt_s)
+        if source is None:
+            source, warm = _warm_start(self.probes, knots)
+        else:
+            warm = stretched_warm_start((self.probes[source][0], self.probes[source][1].result), knots)
+        if knots in self.probes:
+            self.replaced.append(self.probes[knots][1])
+        self.probes[knots], self.source[knots] = (probe, self.solve(probe, warm)), source
+        log.info("hold %.1f s: %s", probe.hold_s, self.probes[knots][1].verdict or "no verdict")
+        return self.probes[knots][1]
+
+    def unconfirmed(self, lo: int, hi: int) -> bool:
+        """The boundary's infeasible verdict (``hi`` = ``lo`` + 1) was not reached from ``lo``'s feasible plan
+        stretched: the four certificates the random requests found local (DDP's longest hold two or more knots
+        short of IPOPT's, benchmarks/README.md) came from a cold start or an infeasible neighbour's plan."""
+        return lo >= 0 and hi == lo + 1 and hi in self.probes and self.source[hi] != lo
+
+    def result(self, lo: int, failed: int | None = None) -> "HoldSearch":
+        return HoldSearch(lo, self.probes, failed, tuple(self.replaced))
+
+
+def _next_guess(lp, knots: int, outcome: Outcome, lo: int, hi: int, step: int) -> int:
+    """Where the next probe goes after ``outcome`` at ``knots``: the thermal replay's prediction."""
+    probe = lp.with_hold(knots * lp.settings.dt_s)
+    predicted = predicted_hold_knots(lp, (probe, outcome.result))
+    if outcome.feasible and not _at_limit(lp, outcome.result):
+        # a plan short of the limit heats more on its lift and lowering than one at the boundary, so its replay
+        # is short: take the time to the limit from its arrival (long: the lowering's heat aside) when longer
+        predicted = max(predicted, _arrival_knots(lp, probe, outcome.result))
+    if not outcome.feasible and predicted >= knots and not _thermal(probe, outcome.result):
+        return 0  # the heat neither decides nor binds: a shorter hold will not help, try touching the goal
+    # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering still
+    # give way a little)
+    bias = 1 if knots - predicted >= 2 else 0
+    return max(predicted, lo + step) if outcome.feasible else min(predicted - bias, hi - step)
+
+
 def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcome], first_knots: int,
                           stop_without_verdict: bool = True) -> HoldSearch:
     """The longest hold, up to the requested one (the fixed horizon), with a feasible plan.
 
     ``solve(problem, warm_start)`` gives a probe's :class:`Outcome`; the first probe holds ``first_knots``.
-    Every verdict is a complete optimisation, warm-started from the nearest solved probe's trajectories; a
-    probe without a verdict stops the search (``failed``), or with ``stop_without_verdict`` off (a controller
-    that needs some verified plan) counts as not feasible: the search goes on to shorter holds, and the result
-    is then the longest hold verified feasible, not a verdict on longer ones."""
-    probes: dict[int, tuple[object, Outcome]] = {}
-    top = lp.hold_knots[1] - lp.hold_knots[0]
+    Every verdict is a complete optimisation, warm-started from the nearest solved probe's trajectories; the
+    infeasible verdict one knot past the longest feasible hold is confirmed from that hold's plan stretched
+    (:meth:`_Search.unconfirmed`). A probe without a verdict stops the search (``failed``), or with
+    ``stop_without_verdict`` off (a controller that needs some verified plan) counts as not feasible: the
+    search goes on to shorter holds, and the result is then the longest hold verified feasible, not a verdict
+    on longer ones (so nothing is confirmed: a real-time review spends no solve on it)."""
+    search, top = _Search(lp, solve), lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
-    while hi - lo > 1:
-        knots = int(np.clip(guess, lo + 1, hi - 1)) if len(probes) < GUIDED_PROBES else (lo + hi) // 2
-        probe = lp.with_hold(knots * lp.settings.dt_s)
-        warm = _warm_start(probes, knots)
-        probes[knots] = (probe, solve(probe, warm))
-        outcome = probes[knots][1]
-        log.info("hold %.1f s: %s", probe.hold_s, outcome.verdict or "no verdict")
+    while hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi)):
+        confirm = hi - lo <= 1
+        guided = len(search.probes) < GUIDED_PROBES
+        knots = hi if confirm else int(np.clip(guess, lo + 1, hi - 1)) if guided else (lo + hi) // 2
+        outcome = search.run(knots, lo if confirm else None)
         if outcome.verdict is None and stop_without_verdict:
-            return HoldSearch(lo, probes, failed=knots)
+            return search.result(lo, failed=knots)
+        if confirm and outcome.feasible:  # the next infeasible probe up, or the request, is the bracket
+            hi = min([k for k, (_, o) in search.probes.items() if k > knots and not o.feasible], default=top + 1)
         lo, hi = (knots, hi) if outcome.feasible else (lo, knots)
-        same_side = outcome.verdict == last and (outcome.feasible or len(probes) > 2)
+        same_side = outcome.verdict == last and (outcome.feasible or len(search.probes) > 2)
         step = 2 * step if same_side else 1   # the same side again: gallop
         last = outcome.verdict
-        predicted = predicted_hold_knots(lp, (probe, outcome.result))
-        if outcome.feasible and not _at_limit(lp, outcome.result):
-            # a plan short of the limit heats more on its lift and lowering than one at the boundary, so its replay
-            # is short: take the time to the limit from its arrival (long: the lowering's heat aside) when longer
-            predicted = max(predicted, _arrival_knots(lp, probe, outcome.result))
-        if not outcome.feasible and predicted >= knots and not _thermal(probe, outcome.result):
-            guess = 0  # the heat neither decides nor binds: a shorter hold will not help, try touching the goal
-        else:
-            # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering
-            # still give way a little)
-            bias = 1 if knots - predicted >= 2 else 0
-            guess = max(predicted, lo + step) if outcome.feasible else min(predicted - bias, hi - step)
-    return HoldSearch(lo, probes)
+        guess = _next_guess(lp, knots, outcome, lo, hi, step)
+    return search.result(lo)
