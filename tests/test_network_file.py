@@ -191,7 +191,7 @@ def test_scope_sections_are_read_checked_and_written_back_unchanged():
 
 def test_the_packaged_paderborn_file_says_what_a_test_bench_pmsm_has():
     p = load_parameters(packaged_parameter_file("paderborn_pmsm"))
-    assert set(p.scope.heat_sources) == {"copper", "iron_losses", "friction_heating"}
+    assert set(p.scope.heat_sources) == {"copper", "iron_losses", "friction_heating", "ac_copper"}
     assert "drive_heating" not in p.scope.allowed_sources and "heat_sources" in p.sources
 
 
