@@ -94,37 +94,36 @@ def test_bad_room_and_ac_copper_get_one_line_naming_the_field(change, field, wor
 
 
 def _truth_recording(seed: int = 5):
-    """Three hours at 10 s: current and speed steps every 10 min, the coolant stepping 25 -> 60 °C while the
-    room drifts near 22 °C; winding and yoke measured with 0.05 K noise.  Integrated exactly (the network is
-    affine in T over each held step: R(T) is linear) by the matrix exponential, numpy only."""
+    """Three hours at 10 s: current, speed and room steps every 2 min, the coolant stepping 25 -> 60 °C halfway;
+    winding and yoke measured with 0.05 K noise.  Integrated exactly (the network is affine in T over each held
+    block: R(T) is linear) by the matrix exponential, numpy only."""
     from thermo_ddp.recordings import Recording
 
     rng = np.random.default_rng(seed)
-    dt, n = 10.0, 1080
-    blocks = n // 60
-    current = np.repeat(rng.choice([40.0, 120.0, 200.0, 260.0], blocks), 60)
-    speed = np.repeat(rng.choice([0.0, 150.0, 300.0, 450.0, 600.0], blocks), 60)
-    coolant = np.where(np.arange(n) < n // 2, 25.0, 60.0)
-    room = 22.0 + 1.5 * np.sin(np.arange(n) * dt / 4000.0)
+    dt, n, block = 10.0, 1080, 12
+    steps = lambda x: np.repeat(x, block)  # noqa: E731
+    current = steps(rng.choice([40.0, 120.0, 200.0, 260.0], n // block))
+    speed = steps(rng.choice([0.0, 150.0, 300.0, 450.0, 600.0], n // block))
+    coolant = steps(np.where(np.arange(n // block) < n // block // 2, 25.0, 60.0))
+    room = steps(22.0 + rng.uniform(-1.5, 1.5, n // block))
     m, t = PMSM.motor, TRUTH
     c = np.array([t["winding"], t["yoke"]])
+    r1 = m.resistance_ohm * m.copper_alpha_per_k  # R(T) = r0 + r1 T
+    r0 = m.resistance_ohm * (1 - m.copper_alpha_per_k * m.resistance_ref_c)
+    g_wy, g_ya, g_yr = 1 / t["winding-yoke"], 1 / t["yoke-ambient"], 1 / t["yoke-room"]
     temps = np.empty((n, 2))
     x = np.array([30.0, 28.0])
-    for k in range(n):
-        temps[k] = x
-        heat = current[k] ** 2 * (1 + t["factor"] * (speed[k] / t["ref_speed"]) ** 2)  # x R(T) = r0 + r1 T
-        r1 = m.resistance_ohm * m.copper_alpha_per_k
-        r0 = m.resistance_ohm * (1 - m.copper_alpha_per_k * m.resistance_ref_c)
-        g_wy, g_ya, g_yr = 1 / t["winding-yoke"], 1 / t["yoke-ambient"], 1 / t["yoke-room"]
-        a = np.array([[-g_wy + r1 * heat, g_wy], [g_wy, -g_wy - g_ya - g_yr]]) / c[:, None]
-        b = np.array([r0 * heat, g_ya * coolant[k] + g_yr * room[k]]) / c
+    for k0 in range(0, n, block):
+        heat = current[k0] ** 2 * (1 + t["factor"] * (speed[k0] / t["ref_speed"]) ** 2)  # x R(T)
         aug = np.zeros((3, 3))
-        aug[:2, :2], aug[:2, 2] = a, b
-        x = (expm(aug * dt) @ np.r_[x, 1.0])[:2]
+        aug[:2, :2] = np.array([[-g_wy + r1 * heat, g_wy], [g_wy, -g_wy - g_ya - g_yr]]) / c[:, None]
+        aug[:2, 2] = np.array([r0 * heat, g_ya * coolant[k0] + g_yr * room[k0]]) / c
+        step = expm(aug * dt)
+        for k in range(k0, k0 + block):
+            temps[k] = x
+            x = (step @ np.r_[x, 1.0])[:2]
     noisy = temps + rng.normal(0.0, 0.05, temps.shape)
-    time_s = np.arange(n) * dt
-    # the held value of a step is given at its start (zero-order hold, as a logger records a setpoint)
-    return Recording("truth", time_s, current_a=current, temperature_c=noisy[:, 0], velocity=speed,
+    return Recording("truth", np.arange(n) * dt, current_a=current, temperature_c=noisy[:, 0], velocity=speed,
                      ambient_c=coolant, room_c=room, sensors={"yoke": noisy[:, 1]})
 
 
@@ -153,3 +152,31 @@ def test_identification_recovers_a_known_room_link_and_ac_copper(truth_grid):
         lo, hi = fit.interval(path)
         assert lo < fit.values[path] < hi
     assert all(r < 1.3 * 0.05 for r in fit.per_sensor().values()), fit.per_sensor()
+
+
+def test_growth_offers_a_room_link_only_with_a_room_and_ac_copper_where_the_copper_is():
+    from thermo_ddp.diagnose.growth import additions
+
+    spec = _params(_thermal()).thermal.general
+    bare = spec.with_values({}).__class__(spec.nodes, spec.links[:2], spec.sources[:1])  # no room link, copper only
+    offered = {(a.term, a.where) for a in additions(bare, ("copper", "ac_copper"), 100.0, 500.0, room=True)}
+    assert {("room_link", "winding"), ("room_link", "yoke"), ("ac_copper", "winding")} <= offered
+    assert not {t for t, w in offered if t == "ac_copper" and w != "winding"}  # never where there is no copper
+    without_room = {a.term for a in additions(bare, ("copper", "ac_copper"), 100.0, 500.0, room=False)}
+    assert "room_link" not in without_room
+    assert "ac_copper" not in {a.term for a in additions(bare, ("copper",), 100.0, 500.0, room=True)}
+
+
+def test_growth_adds_the_room_link_and_ac_copper_the_truth_has(truth_grid):
+    """From the truth's two nodes without its room link and AC copper loss, the growth adds both (each by the
+    nested test) and ends within the sensors' noise."""
+    from thermo_ddp.diagnose.network_diagnosis import diagnose_network
+
+    thermal = _thermal()
+    thermal["link"], thermal["source"] = thermal["link"][:2], thermal["source"][:1]
+    data = PMSM.to_dict() | {"thermal": thermal, "hardware": {"heat_sources": ["copper", "iron_losses", "ac_copper"]}}
+    d = diagnose_network(parameters_from_dict(data, "test.toml"), [truth_grid], progress=False)
+    assert {s.addition.term for s in d.steps} == {"room_link", "ac_copper"}, [s.addition.label for s in d.steps]
+    assert d.status == "ok" and all(r < 1.3 * 0.05 for r in d.final.per_sensor().values())
+    assert d.final.values["thermal.source.ac_copper.factor"] == pytest.approx(0.5, rel=0.05)
+    assert d.network_section()["room_c"] == pytest.approx(22.0, abs=1.0)  # the recording's mean room

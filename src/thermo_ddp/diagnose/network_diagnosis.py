@@ -180,8 +180,10 @@ def _summary(fit: NetworkFit) -> dict:
 
 
 def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition, NetworkFit]]],
-                 settings: GrowthSettings) -> tuple[dict, ...]:
-    """Heat sources of another kind that the nested test cannot tell from a chosen one, with their values."""
+                 settings: GrowthSettings, final: NetworkSpec) -> tuple[dict, ...]:
+    """Heat sources of another kind that the nested test cannot tell from a chosen one, with their values; not
+    of a kind the ``final`` network has (a later step chose it: it is no alternative, and its values, written
+    over the file's own source of that kind, would not be the network that was fitted)."""
     out = []
     tested = [s for s in steps if s.test is not None]
     for step, tried in zip(tested, tries):
@@ -189,7 +191,7 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
             continue
         chosen = step.fit
         for addition, fit in tried:
-            if addition.term == step.addition.term or addition.term in GROWTH_TERMS:
+            if addition.term == step.addition.term or addition.term in GROWTH_TERMS or addition.term in final.kinds:
                 continue
             test = nested_test(subset_fit(fit), subset_fit(chosen, frozenset({"chosen"})))
             if not test.significant(settings.selection.alpha, len(tried), settings.selection.min_rmse_drop):
@@ -230,5 +232,5 @@ def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, s
                     f"{', '.join(grower.kinds)}) explains what is left")
     return NetworkDiagnosis(tuple(g.name for g in grids), params, tuple(grids), explained and final.success,
                             "ok" if explained and final.success else "model_does_not_fit", message, baseline, final,
-                            tuple(steps), alternatives(steps, tries, settings), validation, sigma, rows or {},
+                            tuple(steps), alternatives(steps, tries, settings, final.spec), validation, sigma, rows or {},
                             envelope or {})
