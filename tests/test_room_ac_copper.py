@@ -178,5 +178,6 @@ def test_growth_adds_the_room_link_and_ac_copper_the_truth_has(truth_grid):
     d = diagnose_network(parameters_from_dict(data, "test.toml"), [truth_grid], progress=False)
     assert {s.addition.term for s in d.steps} == {"room_link", "ac_copper"}, [s.addition.label for s in d.steps]
     assert d.status == "ok" and all(r < 1.3 * 0.05 for r in d.final.per_sensor().values())
-    assert d.final.values["thermal.source.ac_copper.factor"] == pytest.approx(0.5, rel=0.05)
+    ac = next(s for s in d.final.spec.sources if s.kind == "ac_copper")  # w_ref: the 95th percentile speed
+    assert ac["factor"] * (TRUTH["ref_speed"] / ac["ref_speed_rad_s"]) ** 2 == pytest.approx(0.5, rel=0.05)
     assert d.network_section()["room_c"] == pytest.approx(22.0, abs=1.0)  # the recording's mean room
