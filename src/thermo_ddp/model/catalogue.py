@@ -166,7 +166,7 @@ LIMIT_NODE = "winding"      # the node the winding limit applies to: every netwo
 
 # [envelope]: the operating range a file was identified on (magnitudes of current and speed).
 ENVELOPE_QUANTITIES: dict[str, str] = {"current_a": "A", "speed_rad_s": "rad/s", "ambient_c": "°C",
-                                       "temperature_c": "°C"}
+                                       "temperature_c": "°C", "room_c": "°C"}
 
 
 def source_value_default(kind: str, key: str) -> float:
