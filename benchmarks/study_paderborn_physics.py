@@ -1,8 +1,9 @@
 """Why a network grown on Paderborn profiles 24 and 60 predicts the other profile badly: candidate physics,
 each fitted on both profiles and left one profile out (issue 24).
 
-A study, not a feature: some candidates are physics the package's networks cannot express yet (a second
-boundary temperature, a loss driven by current and speed together), so this script integrates its own small
+A study, not a feature: written when some candidates were physics the package's networks could not express
+(a second boundary temperature, a loss driven by current and speed together: now the package's terms
+``room_link`` and ``ac_copper``, which the diagnosis offers), so this script integrates its own small
 lumped network (trapezoidal rule on a 10 s grid of held means, copper loss R(T_w) i^2 with the packaged
 file's R, T_ref and alpha, as ``model/thermal.py``).  Nothing in ``thermo_ddp`` uses it; the candidate that
 helps is what a next growth term should be (docs/architecture.md, "Paderborn: what the two profiles say").

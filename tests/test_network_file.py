@@ -18,23 +18,25 @@ from thermo_ddp.model.thermal import network_from_parameters, thermal_parameters
 ELBOW = load_parameters(packaged_parameter_file("arm_left_4_joint"))
 TWO_NODE = {"model": "two_node", "ambient_c": 26.0, "winding_capacity_j_per_k": 40.0, "casing_capacity_j_per_k": 1200.0,
             "winding_casing_k_per_w": 0.9, "casing_ambient_k_per_w": 1.3}
-# Every kind of source, shared among nodes, on a four-node stator network.
+# Every kind of source, shared among nodes, on a four-node stator network with a link to the room.
 NETWORK = {
-    "model": "network", "ambient_c": 30.0, "sensor": "tooth",
+    "model": "network", "ambient_c": 30.0, "room_c": 21.0, "sensor": "tooth",
     "node": [{"name": "winding", "capacity_j_per_k": 1500.0}, {"name": "tooth", "capacity_j_per_k": 900.0},
              {"name": "yoke", "capacity_j_per_k": 2500.0}, {"name": "housing", "capacity_j_per_k": 4000.0}],
     "link": [{"between": ["winding", "tooth"], "resistance_k_per_w": 0.02},
              {"between": ["tooth", "yoke"], "resistance_k_per_w": 0.01},
              {"between": ["yoke", "housing"], "resistance_k_per_w": 0.015},
              {"between": ["housing", "ambient"], "resistance_k_per_w": 0.03},
-             {"between": ["winding", "ambient"], "resistance_k_per_w": 0.4}],
+             {"between": ["winding", "ambient"], "resistance_k_per_w": 0.4},
+             {"between": ["housing", "room"], "resistance_k_per_w": 0.2}],
     "source": [{"kind": "copper", "split": {"winding": 1.0}},
                {"kind": "iron_losses", "split": {"tooth": 0.6, "yoke": 0.4}, "power_w": 300.0,
                 "ref_speed_rad_s": 576.0, "speed_exponent": 1.6},
                {"kind": "friction_heating", "split": {"housing": 1.0}, "linear_w_s_per_rad": 0.05,
                 "quadratic_w_s2_per_rad2": 1e-4, "motor_fraction": 0.5},
                {"kind": "drive_heating", "split": {"housing": 0.25, "yoke": 0.75}, "idle_w": 12.0, "loss_w_per_a2": 0.01},
-               {"kind": "constant", "name": "pump", "split": {"housing": 1.0}, "power_w": 7.0}],
+               {"kind": "constant", "name": "pump", "split": {"housing": 1.0}, "power_w": 7.0},
+               {"kind": "ac_copper", "split": {"winding": 1.0}, "factor": 0.4, "ref_speed_rad_s": 500.0}],
 }
 LEGACY = {
     "one_node": {"model": "one_node", "ambient_c": 26.0, "sensor": "winding", "capacity_j_per_k": 300.0,
@@ -157,7 +159,8 @@ def test_symbols_at_dotted_paths_differentiate_the_same_rhs():
 
 
 SCOPE = {
-    "hardware": {"heat_sources": ["copper", "iron_losses", "friction_heating", "drive_heating", "constant"]},
+    "hardware": {"heat_sources": ["copper", "iron_losses", "friction_heating", "drive_heating", "constant",
+                                  "ac_copper"]},
     "uncertainty": {"thermal.node.winding.capacity_j_per_k": [1400.0, 1600.0],
                     "thermal.source.iron_losses.speed_exponent": [1.4, 1.9], "motor.resistance_ohm": [0.6, 0.8]},
     "envelope": {"current_a": [0.0, 214.0], "speed_rad_s": [0.0, 576.0], "ambient_c": [16.5, 20.6],
@@ -191,7 +194,7 @@ def test_scope_sections_are_read_checked_and_written_back_unchanged():
 
 def test_the_packaged_paderborn_file_says_what_a_test_bench_pmsm_has():
     p = load_parameters(packaged_parameter_file("paderborn_pmsm"))
-    assert set(p.scope.heat_sources) == {"copper", "iron_losses", "friction_heating"}
+    assert set(p.scope.heat_sources) == {"copper", "iron_losses", "friction_heating", "ac_copper"}
     assert "drive_heating" not in p.scope.allowed_sources and "heat_sources" in p.sources
 
 
@@ -273,6 +276,7 @@ def test_the_network_graph_draws_every_node_link_and_source(tmp_path):
         assert f"{link['resistance_k_per_w']:.3g} K/W" in texts
     assert "iron_losses 60 %" in texts and "iron_losses 40 %" in texts and "pump 100 %" in texts
     assert "drive_heating 75 %" in texts and "(measured)" in texts and texts.count("(measured)") == 1
+    assert "ac_copper 100 %" in texts and "room" in texts.split(" | ")
     filled = [tuple(c.get_facecolor()[0]) for c in ax.collections]
     assert sum(f[:3] == (1.0, 1.0, 1.0) for f in filled) == len(NETWORK["node"]) - 1  # unmeasured: white
     fig.savefig(tmp_path / "graph.png")

@@ -151,6 +151,8 @@ def test_paderborn_profile_60_lies_outside_a_file_identified_on_profile_24(tmp_p
     q = d["envelope"]["quantities"]
     assert d["envelope"]["outside"] and q["ambient_c"]["outside"] and q["current_a"]["outside"]
     assert q["ambient_c"]["above_by"] > 45.0 and q["current_a"]["above_by"] > 60.0
+    # the room (the CSV's ambient column, room_c in the maps): 18.4-26.3 °C in profile 24, down to 15.4 °C in 60
+    assert q["room_c"]["outside"] and q["room_c"]["below_by"] == pytest.approx(3.0, abs=0.1)
     assert "ambient_c" in d["message"] and "never identified" in d["message"]
     assert set(d["per_sensor"]) == {"winding"}  # a one-node file: tooth and yoke are no nodes of it
 

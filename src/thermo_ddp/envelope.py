@@ -2,8 +2,8 @@
 check of new recordings against it.
 
 The quantities (:data:`~thermo_ddp.model.catalogue.ENVELOPE_QUANTITIES`): ``current_a`` and
-``speed_rad_s`` as magnitudes (|current_a|, |velocity|), ``ambient_c`` and ``temperature_c`` (the
-measured sensor) as recorded.  A quantity a recording does not carry is left out.  ``identify`` and
+``speed_rad_s`` as magnitudes (|current_a|, |velocity|), ``ambient_c``, ``temperature_c`` (the
+measured sensor) and ``room_c`` (the second boundary) as recorded.  A quantity a recording does not carry is left out.  ``identify`` and
 ``diagnose`` write :func:`envelope_of` their recordings into the file; ``validate`` checks a recording
 against it (:func:`check_envelope`): a quantity is outside when its range here reaches beyond the
 identified range by more than ``tolerance`` of that range's width (sensor noise and the last samples
@@ -25,7 +25,7 @@ TOLERANCE = 0.05  # of the identified range's width; see the module docstring
 def _quantities(rec: Recording) -> dict[str, np.ndarray]:
     signals = {"current_a": None if rec.current_a is None else np.abs(rec.current_a),
                "speed_rad_s": None if rec.velocity is None else np.abs(rec.velocity),
-               "ambient_c": rec.ambient_c, "temperature_c": rec.temperature_c}
+               "ambient_c": rec.ambient_c, "temperature_c": rec.temperature_c, "room_c": rec.room_c}
     return {k: v for k, v in signals.items() if v is not None}
 
 

@@ -3,7 +3,8 @@
 The CSV contract (docs/architecture.md): a header row, one sample per row, ``time_s`` (strictly
 increasing seconds) and any of ``current_a``, ``temperature_c`` (the measured sensor), ``position``,
 ``velocity``, ``effort`` (ROS ``JointState`` meaning, SI units of the joint), ``ambient_c``,
-``voltage_v``, and more measured temperatures, one per network node: ``node_<name>_c``
+``voltage_v``, ``room_c`` (a second boundary: the room around a liquid-cooled motor whose ``ambient_c`` is the
+coolant), and more measured temperatures, one per network node: ``node_<name>_c``
 (:attr:`Recording.sensors`).  Any other CSV is read through a column map (``--columns MAP.toml``,
 :mod:`thermo_ddp.column_maps`): its own column names, date-time stamps, scales, a ``[sensors]`` table,
 rows with empty cells and gaps that split it into segments.  Every problem with the input raises one
@@ -29,9 +30,9 @@ from .model.parameters import BOUNDS
 
 log = logging.getLogger(__name__)
 
-SIGNALS = ("current_a", "temperature_c", "position", "velocity", "effort", "ambient_c", "voltage_v")
+SIGNALS = ("current_a", "temperature_c", "position", "velocity", "effort", "ambient_c", "voltage_v", "room_c")
 COLUMNS = ("time_s",) + SIGNALS
-_CELSIUS_COLUMNS = ("temperature_c", "ambient_c")
+_CELSIUS_COLUMNS = ("temperature_c", "ambient_c", "room_c")
 KELVIN_SUSPECT_C = 200.0  # a motor casing or a room above 200 degC means the file holds kelvin
 # Largest plausible magnitudes: the parameter catalogue's bound of the matching motor quantity.
 PLAUSIBLE = {"current_a": "current_peak_a", "voltage_v": "bus_voltage_v", "velocity": "iron_loss_ref_speed_rad_s"}
@@ -108,6 +109,7 @@ class Recording:
     effort: np.ndarray | None = None
     ambient_c: np.ndarray | None = None
     voltage_v: np.ndarray | None = None
+    room_c: np.ndarray | None = None
     joint: str | None = None
     source: str = ""
     row_offset: int = 0  # row of sample 0 in the source (2 for a CSV with a header), for messages

@@ -33,7 +33,7 @@ from ._figures import new_figure
 from .envelope import TOLERANCE, EnvelopeCheck, check_envelope
 from .errors import InputError
 from .identify.thermal import load_joint_parameters
-from .identify.thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
+from .identify.thermal_data import BOUNDARY_ROWS, INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 from .model.parameters import JointParameters
 from .model.thermal import joint_heat_rhs, network_from_parameters
 from .recordings import Recording, RecordingSet, as_recordings, read_recordings
@@ -215,8 +215,9 @@ def _simulator(params: JointParameters, paths: Sequence[str] = ()) -> _Simulator
     temps = ca.SX.sym("temperatures_c", len(network.nodes))
     u = ca.SX.sym("inputs", len(INPUT_ROWS))
     row = dict(zip(INPUT_ROWS, ca.vertsplit(u)))
-    held = {k: row[k] for k in INPUT_ROWS[1:] if k != "ambient_c"}
-    rhs = joint_heat_rhs(network, sym.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held)
+    held = {k: row[k] for k in INPUT_ROWS[1:] if k not in BOUNDARY_ROWS}
+    rhs = joint_heat_rhs(network, sym.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held,
+                         row["room_c"])
     h = row["step_s"]
     trapezoid = temps + h * ca.solve(ca.SX.eye(temps.numel()) - 0.5 * h * ca.jacobian(rhs, temps), rhs)
     step = ca.Function("validate_step", [temps, u, p], [trapezoid])

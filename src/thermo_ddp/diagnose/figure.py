@@ -84,14 +84,16 @@ def _shade(diagnosis, recording: str, ax) -> None:
 
 def draw_network(spec, ax, sensors=()) -> None:
     """Draw a thermal network (:class:`~thermo_ddp.model.network_spec.NetworkSpec`) on ``ax`` as a graph:
-    its nodes (capacity; measured ones, ``sensors``, filled), its links (resistance) and the heat sink, and
-    each heat source with its share at the nodes it heats."""
-    from ..model.network_spec import AMBIENT
+    its nodes (capacity; measured ones, ``sensors``, filled), its links (resistance), the heat sink (and the
+    room, when a link reaches it), and each heat source with its share at the nodes it heats."""
+    from ..model.network_spec import AMBIENT, ROOM
 
     names = spec.node_names
     angle = np.linspace(np.pi * 0.9, np.pi * 0.1, len(names)) if len(names) > 1 else np.array([np.pi / 2])
     where = {n: (1.6 * np.cos(a), 1.2 * np.sin(a)) for n, a in zip(names, angle)}  # an arc above the sink
-    where[AMBIENT] = (0.0, -1.2)
+    boundaries = {AMBIENT: ((0.0, -1.2), f"{AMBIENT} (sink)"), ROOM: ((1.6, -1.2), ROOM)}
+    boundaries = {b: v for b, v in boundaries.items() if b == AMBIENT or any(b in k.between for k in spec.links)}
+    where |= {b: xy for b, (xy, _) in boundaries.items()}
     for link in spec.links:
         (xa, ya), (xb, yb) = where[link.between[0]], where[link.between[1]]
         ax.plot([xa, xb], [ya, yb], "-", color="0.4", lw=1.5, zorder=1)
@@ -103,8 +105,9 @@ def draw_network(spec, ax, sensors=()) -> None:
         ax.scatter([x], [y], s=900, color="tab:blue" if measured else "white", edgecolors="tab:blue", zorder=3)
         ax.text(x, y - 0.22, f"{node.name}\n{float(node.capacity_j_per_k):.3g} J/K" + ("\n(measured)" if measured else ""),
                 ha="center", va="top", fontsize=8, zorder=4)
-    ax.scatter([0.0], [-1.2], s=900, marker="s", color="0.85", edgecolors="0.3", zorder=3)
-    ax.text(0.0, -1.45, f"{AMBIENT} (sink)", ha="center", va="top", fontsize=8)
+    for (x, y), label in boundaries.values():
+        ax.scatter([x], [y], s=900, marker="s", color="0.85", edgecolors="0.3", zorder=3)
+        ax.text(x, y - 0.25, label, ha="center", va="top", fontsize=8)
     heated: dict[str, int] = {}
     for src in spec.sources:
         for node, share in src.split.items():

@@ -11,7 +11,10 @@ values (every sensor at once, each weighted by its noise, :func:`~thermo_ddp.ide
   heated by its own losses, seen by the stator through the air gap);
 - a heat source of a kind the motor can have (``[hardware] heat_sources``): ``iron_losses``
   P_ref (|w| / w_ref)^n with n fitted in 1-2.5, ``friction_heating``, ``drive_heating``, ``constant``,
-  at one node, or a source already there spread to one more node (its shares fitted).
+  at one node, or a source already there spread to one more node (its shares fitted); ``ac_copper``
+  k R(T_w) i^2 (|w| / w_ref)^2 where the copper heat is, with the copper's split;
+- ``room_link``: a link from a node to the room, when the recordings give the room's temperature
+  (``room_c``: a second boundary besides the coolant's ``ambient_c``).
 
 An addition is accepted by today's statistics (:mod:`~thermo_ddp.diagnose.selection`): the nested
 likelihood-ratio test with the sample size corrected for the residual autocorrelation, Bonferroni over the
@@ -37,19 +40,21 @@ from ..identify.network import (IRON_EXPONENT_RANGE, capacity, free_paths, link,
 from ..identify.network_fit import Free, NetworkFit, fit_network, sensor_noise
 from ..identify.thermal_data import ThermalGrid
 from ..model.catalogue import SOURCE_KINDS
-from ..model.network_spec import AMBIENT, NetworkSpec, SourceSpec
+from ..model.network_spec import AMBIENT, ROOM, LinkSpec, NetworkSpec, SourceSpec
 from ..model.parameters import JointParameters
 from .selection import HeldOutCheck, NestedTest, SubsetFit, SubsetSettings, nested_test
 
 log = logging.getLogger(__name__)
 
-GROWTH_TERMS = ("sensor_node", "sink_node", "source_node")
+GROWTH_TERMS = ("sensor_node", "sink_node", "source_node", "room_link")
 # Physical ranges of the values a growth frees: capacities within 1/1000 to 10 times the file's whole
 # capacity (a node is a part of this motor, not a second coolant); a liquid-cooled housing (1e-4 K/W) to
 # a part in still air (100 K/W).
 CAPACITY_SHARE = (1e-3, 10.0)
 RESISTANCE_RANGE = (1e-4, 100.0)
 HEAT_KINDS = tuple(k for k in SOURCE_KINDS if k != "copper")
+COPPER_BOUND = ("ac_copper",)  # heat in the copper itself: placed with the copper's split, never elsewhere
+AC_FACTOR_RANGE = (0.0, 10.0)  # the catalogue's ac_copper_factor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,6 +101,8 @@ class Ranges:
             return Free(path, *RESISTANCE_RANGE)
         if name == "speed_exponent":
             return Free(path, *IRON_EXPONENT_RANGE, log=False)
+        if name == "factor":
+            return Free(path, *AC_FACTOR_RANGE, log=False)
         if name == "loss_w_per_a2":
             return Free(path, 0.0, self.heat_max_w / self.current_nominal_a ** 2, log=False)
         if ".split." in path:
@@ -129,13 +136,33 @@ def _start_values(kind: str, heat_w: float, ref_speed: float) -> dict[str, float
             "friction_heating": {"linear_w_s_per_rad": heat_w / ref_speed / 2,
                                  "quadratic_w_s2_per_rad2": heat_w / ref_speed ** 2 / 2},
             "drive_heating": {"idle_w": heat_w, "loss_w_per_a2": 0.0},
-            "constant": {"power_w": heat_w}}[kind]
+            "constant": {"power_w": heat_w},
+            "ac_copper": {"factor": 0.1, "ref_speed_rad_s": ref_speed}}[kind]
 
 
-def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed: float) -> list[Addition]:
-    """Every allowed addition to ``spec`` (module docstring)."""
-    out = []
-    kinds = [k for k in kinds if k in HEAT_KINDS]
+def room_links(spec: NetworkSpec) -> list[Addition]:
+    """A link to the room from each node that has none (start: three times the mean sink resistance)."""
+    r = 3.0 * float(np.mean([float(k.resistance_k_per_w) for k in sink_links(spec)]))
+    return [Addition("room_link", node, dataclasses.replace(spec, links=spec.links + (LinkSpec((node, ROOM), r),)))
+            for node in spec.node_names if link(spec, node, ROOM) is None]
+
+
+def copper_bound(spec: NetworkSpec, kind: str, heat_w: float, ref_speed: float) -> list[Addition]:
+    """``kind`` (a loss of the copper itself) with the copper's split."""
+    copper = next((s for s in spec.sources if s.kind == "copper"), None)
+    if copper is None or kind in spec.kinds:
+        return []
+    src = SourceSpec(kind, dict(copper.split), _start_values(kind, heat_w, ref_speed))
+    return [Addition(kind, "+".join(copper.split), with_source(spec, src))]
+
+
+def additions(spec: NetworkSpec, kinds: Sequence[str], heat_w: float, ref_speed: float,
+              room: bool = False) -> list[Addition]:
+    """Every allowed addition to ``spec`` (module docstring); ``room``: the recordings give the room's
+    temperature."""
+    out = [a for kind in kinds if kind in COPPER_BOUND for a in copper_bound(spec, kind, heat_w, ref_speed)]
+    out += room_links(spec) if room else []
+    kinds = [k for k in kinds if k in HEAT_KINDS and k not in COPPER_BOUND]
     for kind in (k for k in kinds if k not in spec.kinds):
         for node in spec.node_names:
             src = SourceSpec(kind, {node: 1.0}, _start_values(kind, heat_w, ref_speed))
@@ -184,6 +211,7 @@ class Grower:
                              m.current_nominal_a)
         speeds = np.abs(np.concatenate([g.velocity for g in grids]))
         self.ref_speed = max(float(np.percentile(speeds, 95)), 1e-3)
+        self.room = all(g.has_room for g in grids)
         sensors = dict.fromkeys(n for g in grids for n in g.sensors)
         self.noise = {n: sensor_noise(grids, n) for n in sensors}
         self._folds: dict[str, list[np.ndarray]] = {}
@@ -215,7 +243,7 @@ class Grower:
     def step(self, fit: NetworkFit) -> tuple[Step | None, list[tuple[Addition, NetworkFit]]]:
         """Fit every addition to ``fit``'s network; the best one that passes the tests (None if none)."""
         tried = []
-        for addition in additions(fit.spec, self.kinds, 0.1 * self.heat_max_w, self.ref_speed):
+        for addition in additions(fit.spec, self.kinds, 0.1 * self.heat_max_w, self.ref_speed, self.room):
             new = self.fit(addition.spec, screen=True)
             if new.success:
                 tried.append((dataclasses.replace(addition, spec=new.spec), new))

@@ -14,15 +14,15 @@ import numpy as np
 from tqdm import tqdm
 
 from .._figures import new_figure
-from ..model.network_spec import NetworkSpec
+from ..model.network_spec import ROOM, NetworkSpec
 from ..identify.network import FIXED_VALUES, values_of
 from ..identify.network_fit import NetworkFit
 from ..model.catalogue import SOURCE_KINDS
-from ..identify.thermal_data import ThermalGrid
+from ..identify.thermal_data import ThermalGrid, mean_room_c
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
 from ._thermal_result import ThermalOutcome
-from .growth import HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
+from .growth import GROWTH_TERMS, HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
 from .localise import ResidualSeries
 from .selection import nested_test
 
@@ -94,12 +94,20 @@ class NetworkDiagnosis(ThermalOutcome):
                         "more speeds until the temperatures settle: a speed-dependent loss changes, a constant does not"})
         return out
 
+    def network_section(self) -> dict:
+        """The final network as the file's [thermal] section; with links to the room and no ``room_c`` in the
+        file, the recordings' mean room temperature as ``room_c``."""
+        room = self.params.thermal.room_c
+        if room is None and any(ROOM in k.between for k in self.final.spec.links):
+            room = mean_room_c(self.grids)
+        return network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor, room)
+
     def parameter_file(self) -> dict | None:
         """The improved file: the grown network with [uncertainty], [envelope] and [[alternatives]]."""
         if not self.final.success:
             return None
         data = self.params.to_dict()
-        data["thermal"] = network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor)
+        data["thermal"] = self.network_section()
         data["uncertainty"] = self.final.uncertainty()
         data["envelope"] = {k: list(v) for k, v in self.envelope.items()}
         if self.alternatives:
@@ -116,7 +124,7 @@ class NetworkDiagnosis(ThermalOutcome):
                "baseline": _summary(self.baseline), "mismatches": [],
                "missing_physics": [self.step_report(s, b) for s, b in zip(self.steps, befores)],
                "not_determinable": self.not_determinable(), "final": _summary(self.final),
-               "network": network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor),
+               "network": self.network_section(),
                "noise": {"sensor_c": dict(self.final.noise_c), "residual_c": dict(self.residual_sigma)},
                "alternatives": list(self.alternatives), "unexplained": [], "validation": None,
                "parameter_file": self.parameter_file()}
@@ -156,9 +164,9 @@ class NetworkDiagnosis(ThermalOutcome):
         return Path(path)
 
 
-def network_section(spec: NetworkSpec, ambient_c: float, sensor: str) -> dict:
+def network_section(spec: NetworkSpec, ambient_c: float, sensor: str, room_c: float | None = None) -> dict:
     """The file's [thermal] section of a network (``model = "network"``)."""
-    return ThermalParameters("network", ambient_c, {}, sensor, network=spec).to_dict()
+    return ThermalParameters("network", ambient_c, {}, sensor, network=spec, room_c=room_c).to_dict()
 
 
 def _describe(spec: NetworkSpec) -> str:
@@ -172,8 +180,10 @@ def _summary(fit: NetworkFit) -> dict:
 
 
 def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition, NetworkFit]]],
-                 settings: GrowthSettings) -> tuple[dict, ...]:
-    """Heat sources of another kind that the nested test cannot tell from a chosen one, with their values."""
+                 settings: GrowthSettings, final: NetworkSpec) -> tuple[dict, ...]:
+    """Heat sources of another kind that the nested test cannot tell from a chosen one, with their values; not
+    of a kind the ``final`` network has (a later step chose it: it is no alternative, and its values, written
+    over the file's own source of that kind, would not be the network that was fitted)."""
     out = []
     tested = [s for s in steps if s.test is not None]
     for step, tried in zip(tested, tries):
@@ -181,7 +191,7 @@ def alternatives(steps: Sequence[Step], tries: Sequence[Sequence[tuple[Addition,
             continue
         chosen = step.fit
         for addition, fit in tried:
-            if addition.term in (step.addition.term, "sink_node", "source_node", "sensor_node"):
+            if addition.term == step.addition.term or addition.term in GROWTH_TERMS or addition.term in final.kinds:
                 continue
             test = nested_test(subset_fit(fit), subset_fit(chosen, frozenset({"chosen"})))
             if not test.significant(settings.selection.alpha, len(tried), settings.selection.min_rmse_drop):
@@ -222,5 +232,5 @@ def diagnose_network(params: JointParameters, grids: Sequence[ThermalGrid], *, s
                     f"{', '.join(grower.kinds)}) explains what is left")
     return NetworkDiagnosis(tuple(g.name for g in grids), params, tuple(grids), explained and final.success,
                             "ok" if explained and final.success else "model_does_not_fit", message, baseline, final,
-                            tuple(steps), alternatives(steps, tries, settings), validation, sigma, rows or {},
+                            tuple(steps), alternatives(steps, tries, settings, final.spec), validation, sigma, rows or {},
                             envelope or {})

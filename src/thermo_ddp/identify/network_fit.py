@@ -31,7 +31,7 @@ from ..model.thermal import joint_heat_rhs
 from .fit_report import Z95, covariance, integrated_autocorrelation
 from ..model.network_spec import NetworkSpec
 from .network import identification_network, iron_features, values_of, with_values
-from .thermal_data import INPUT_ROWS, ThermalGrid
+from .thermal_data import BOUNDARY_ROWS, INPUT_ROWS, ThermalGrid
 
 log = logging.getLogger(__name__)
 MIN_NOISE_C = 0.02  # a sensor's reading is not trusted below 0.02 K (calibration and lag of a thermocouple)
@@ -100,10 +100,10 @@ class NetworkModel:
         temps = ca.SX.sym("temperatures_c", len(self.nodes))
         u = ca.SX.sym("inputs", len(INPUT_ROWS))
         row = {name: u[k] for k, name in enumerate(INPUT_ROWS)}
-        held = {key: row[key] for key in INPUT_ROWS[1:] if key != "ambient_c"}
+        held = {key: row[key] for key in INPUT_ROWS[1:] if key not in BOUNDARY_ROWS}
         held |= iron_features(sym, held)
         rhs = joint_heat_rhs(self._network, self.params.motor, temps, ca.sqrt(row["current_sq_a2"]), 0.0,
-                             row["ambient_c"], held)
+                             row["ambient_c"], held, row["room_c"])
         return rhs, temps, u
 
     def _initial(self, measured: tuple[bool, ...]) -> ca.Function:

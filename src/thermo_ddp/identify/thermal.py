@@ -63,7 +63,7 @@ from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, T
 from ..recordings import as_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, correlation, covariance, integrated_autocorrelation
-from .thermal_data import INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
+from .thermal_data import BOUNDARY_ROWS, INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 
 log = logging.getLogger(__name__)
 
@@ -227,8 +227,9 @@ class ThermalModel:
         temps = ca.SX.sym("temperatures_c", n)
         u = ca.SX.sym("inputs", len(INPUT_ROWS))
         row = {name: u[k] for k, name in enumerate(INPUT_ROWS)}
-        held = {key: row[key] for key in INPUT_ROWS[2:] if key != "ambient_c"}  # the held loss drivers
-        rhs = joint_heat_rhs(self.network, m, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held)
+        held = {key: row[key] for key in INPUT_ROWS[2:] if key not in BOUNDARY_ROWS}  # the held loss drivers
+        rhs = joint_heat_rhs(self.network, m, temps, ca.sqrt(row["current_sq_a2"]), 0.0, row["ambient_c"], held,
+                             row["room_c"])
         h = row["step_s"]
         a = ca.jacobian(rhs, temps)
         b = ca.substitute(rhs, temps, ca.SX.zeros(n))

@@ -16,12 +16,15 @@ from ..model.parameters import JointParameters
 from ..model.thermal import feature_key, feature_value
 from ..recordings import Recording
 
-# Loss drivers held over each (sub-)step, (name in motor.losses_w, exponent): rows 1-3 and 5- of
-# ThermalGrid.inputs; row 0 is the step length, row 4 the ambient.  The speed's powers 1.5 and 2.5 serve
-# the iron loss of a fitted exponent (identify.network.SPEED_EXPONENTS).
+# Loss drivers held over each (sub-)step, (name in motor.losses_w, exponent): rows 1-3 and 5-9 of
+# ThermalGrid.inputs; row 0 is the step length, row 4 the ambient, the last row the room (the second
+# boundary).  The speed's powers 1.5 and 2.5 serve the iron loss of a fitted exponent
+# (identify.network.SPEED_EXPONENTS); i^2 w^2 the AC copper loss.
 DRIVERS = (("current_sq_a2", 1.0), ("friction_w", 1.0), ("speed_abs_rad_s", 2.0), ("speed_abs_rad_s", 1.0),
-           ("speed_abs_rad_s", 1.5), ("speed_abs_rad_s", 2.5))
-INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", *(feature_key(*d) for d in DRIVERS[3:]))
+           ("speed_abs_rad_s", 1.5), ("speed_abs_rad_s", 2.5), ("current_sq_speed_sq", 1.0))
+INPUT_ROWS = ("step_s", *(feature_key(*d) for d in DRIVERS[:3]), "ambient_c", *(feature_key(*d) for d in DRIVERS[3:]),
+              "room_c")
+BOUNDARY_ROWS = ("ambient_c", "room_c")  # inputs that are boundary temperatures, not loss drivers
 
 @checked_settings("thermal settings", min_step_s="[0, inf)", max_step_s="(0, inf)", head_s="[0, inf)",
                   gap_factor="(1, inf)", gap_window_s="(0, inf)", max_nfev="[1, inf)", chi2_tolerance="(0, 1]",
@@ -72,7 +75,7 @@ class ThermalGrid:
     measured_c: np.ndarray      # measured sensor temperature at the kept samples (K,)
     current_a: np.ndarray       # at the kept samples (for regimes and plots)
     velocity: np.ndarray        # at the kept samples (zeros when the recording has none)
-    inputs: np.ndarray          # (6, S): the held INPUT_ROWS of every sub-step
+    inputs: np.ndarray          # (len(INPUT_ROWS), S): the held INPUT_ROWS of every sub-step
     output_index: np.ndarray    # sub-step after which kept sample k+1 is reached (K-1,)
     has_velocity: bool
     has_ambient: bool
@@ -81,6 +84,7 @@ class ThermalGrid:
     speed_source: str = "none"  # "velocity" (recorded), "position differences" or "none"
     sensors: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)  # node -> measured at kept samples
     ambient_c: np.ndarray | None = None  # at the kept samples (the file's ambient_c when not recorded)
+    has_room: bool = False  # the recording has the room's temperature (``room_c``)
 
     @property
     def thermometry_samples(self) -> int:
@@ -116,7 +120,9 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     v = np.zeros_like(t) if velocity is None else velocity
     drivers = np.array(_drivers(params)(current[None, :], v[None, :]))
     ambient = np.full_like(t, params.thermal.ambient_c) if rec.ambient_c is None else np.asarray(rec.ambient_c, float)
-    features = _bridge_gaps(t, np.vstack([drivers[:3], ambient, drivers[3:]]), settings)
+    room = (np.asarray(rec.room_c, float) if rec.room_c is not None
+            else np.full_like(t, params.thermal.room_c) if params.thermal.room_c is not None else ambient)
+    features = _bridge_gaps(t, np.vstack([drivers[:3], ambient, drivers[3:], room]), settings)
     keep = _kept(t, settings.min_step_s)
     dt = np.diff(t)
     cum = np.concatenate([np.zeros((len(features), 1)), np.cumsum(features[:, :-1] * dt, axis=1)], axis=1)
@@ -129,8 +135,18 @@ def thermal_grid(rec: Recording, params: JointParameters, settings: ThermalSetti
     measured |= {node: np.asarray(values, float)[keep] for node, values in rec.sensors.items()}
     return ThermalGrid(rec.name, t[keep], np.asarray(rec.temperature_c, float)[keep], current[keep], v[keep],
                        inputs, np.cumsum(substeps) - 1, velocity is not None, rec.ambient_c is not None, *thermometry,
-                       speed_source=speed_source, sensors=measured, ambient_c=ambient[keep])
+                       speed_source=speed_source, sensors=measured, ambient_c=ambient[keep],
+                       has_room=rec.room_c is not None)
 
+
+
+def mean_room_c(grids) -> float | None:
+    """The time-weighted mean room temperature of grids that record it (None when none does): the
+    ``[thermal] room_c`` a file with room links is written with, for uses without a room column."""
+    parts = [(g.inputs[0], g.inputs[INPUT_ROWS.index("room_c")]) for g in grids if g.has_room]
+    if not parts:
+        return None
+    return float(sum(np.sum(h * r) for h, r in parts) / sum(np.sum(h) for h, _ in parts))
 
 
 def split_at_gaps(rec: Recording, factor: float = 10.0, min_gap_s: float = 60.0,

@@ -44,7 +44,8 @@ def identify_network_files(params: JointParameters, recordings, settings: Therma
     fit = fit_network(params, spec, params.thermal.sensor_node, tuple(_free(p) for p in free_paths(spec)), grids)
     unused = sorted({n for g in grids for n in g.sensors} - set(spec.node_names))
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
-    data |= {"thermal": ThermalParameters("network", params.thermal.ambient_c, {}, fit.sensor, network=fit.spec).to_dict(),
+    data |= {"thermal": ThermalParameters("network", params.thermal.ambient_c, {}, fit.sensor, network=fit.spec,
+                                         room_c=params.thermal.room_c).to_dict(),
              "uncertainty": fit.uncertainty(), "envelope": {k: list(v) for k, v in envelope_of(recordings).items()}}
     message = fit.message + (f"; sensors without a node in the network, not fitted: {', '.join(unused)} "
                              "(thermo-ddp diagnose adds them)" if unused else "")

@@ -81,6 +81,10 @@ BOUNDS: dict[str, Bound] = {
     "iron_loss_speed_exponent": Bound(1.0, 2.5, "", "hysteresis ~ speed (1), eddy currents ~ speed^2 (2), "
                                       "skin effect and excess losses between; IEC 60404-8 fits stay below 2.5"),
     "constant_heat_w": _HEAT_W,
+    "ac_copper_factor": Bound(0.0, 10.0, "", "AC over DC copper loss at the reference speed: skin and proximity "
+                              "effects of traction windings reach ~0.1-1 at rated frequency, not 10"),
+    "ac_copper_ref_speed_rad_s": Bound(1e-3, 1e4, "rad/s", "a joint speed"),
+    "room_c": _CELSIUS,
     "share": Bound(0.0, 1.0, "", "the part of a source's heat that enters one node"),
     # [limits]
     "winding_max_c": _HOT_CELSIUS,
@@ -141,6 +145,7 @@ def checked_value(source: str, name: str, key: str, value: Any) -> float:
 #   friction_heating  linear_w_s_per_rad |w| + quadratic_w_s2_per_rad2 w^2 + motor_fraction tau_f(w) w
 #   drive_heating     idle_w + loss_w_per_a2 i^2
 #   constant          power_w
+#   ac_copper         factor R(T_w) i^2 (|w| / ref_speed_rad_s)^2 (skin and proximity effects in the copper)
 SOURCE_KINDS: dict[str, dict[str, str]] = {
     "copper": {},
     "iron_losses": {"power_w": "iron_loss_w", "ref_speed_rad_s": "iron_loss_ref_speed_rad_s",
@@ -150,16 +155,18 @@ SOURCE_KINDS: dict[str, dict[str, str]] = {
                          "motor_fraction": "friction_heating_fraction"},
     "drive_heating": {"idle_w": "drive_idle_w", "loss_w_per_a2": "drive_loss_w_per_a2"},
     "constant": {"power_w": "constant_heat_w"},
+    "ac_copper": {"factor": "ac_copper_factor", "ref_speed_rad_s": "ac_copper_ref_speed_rad_s"},
 }
 HEAT_SOURCE_KINDS = tuple(SOURCE_KINDS)
-_SOURCE_ONLY_DEFAULTS = {"constant_heat_w": 0.0}  # source values without a legacy [thermal] key
-NETWORK_KEYS = ("share", *_SOURCE_ONLY_DEFAULTS)   # catalogue keys only a general network uses
+# source values without a legacy [thermal] key
+_SOURCE_ONLY_DEFAULTS = {"constant_heat_w": 0.0, "ac_copper_factor": 0.0, "ac_copper_ref_speed_rad_s": 1.0}
+NETWORK_KEYS = ("share", "room_c", *_SOURCE_ONLY_DEFAULTS)   # catalogue keys only a general network uses
 SHARE_SUM_TOLERANCE = 1e-6  # the shares of one source's split sum to 1 within this
 LIMIT_NODE = "winding"      # the node the winding limit applies to: every network has it
 
 # [envelope]: the operating range a file was identified on (magnitudes of current and speed).
 ENVELOPE_QUANTITIES: dict[str, str] = {"current_a": "A", "speed_rad_s": "rad/s", "ambient_c": "°C",
-                                       "temperature_c": "°C"}
+                                       "temperature_c": "°C", "room_c": "°C"}
 
 
 def source_value_default(kind: str, key: str) -> float:

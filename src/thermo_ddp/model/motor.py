@@ -72,13 +72,17 @@ def friction_w(m, velocity_rad_s):
     return m.viscous_friction_nm_s_per_rad * velocity_rad_s ** 2 + m.coulomb_friction_nm * smooth_abs(m, velocity_rad_s)
 
 
-def losses_w(m, current_a, velocity_rad_s, winding_c) -> dict:
+def losses_w(m, current_a, velocity_rad_s, winding_c, held=None) -> dict:
     """The named losses and loss drivers a thermal network's heat sources may draw on (the heat a
-    source injects from them, e.g. drive or iron losses, is the network's: ``thermal.HeatSource``)."""
-    return {"joule_w": joule_w(m, current_a, winding_c),
-            "friction_w": friction_w(m, velocity_rad_s),
-            "current_sq_a2": current_a ** 2,
-            "speed_abs_rad_s": smooth_abs(m, velocity_rad_s)}
+    source injects from them, e.g. drive or iron losses, is the network's: ``thermal.HeatSource``).
+    ``held`` replaces drivers by their means over a zero-order-hold interval; the losses that scale with
+    R(T_w) (``joule_w`` = R i^2, ``ac_joule_w`` = R i^2 w^2) are R(T_w) times the held driver."""
+    drivers = {"friction_w": friction_w(m, velocity_rad_s),
+               "current_sq_a2": current_a ** 2,
+               "speed_abs_rad_s": smooth_abs(m, velocity_rad_s),
+               "current_sq_speed_sq": current_a ** 2 * velocity_rad_s ** 2} | dict(held or {})
+    r = resistance_ohm(m, winding_c)
+    return drivers | {"joule_w": r * drivers["current_sq_a2"], "ac_joule_w": r * drivers["current_sq_speed_sq"]}
 
 
 def current_for_torque_a(m, torque_nm, velocity_rad_s=0.0):

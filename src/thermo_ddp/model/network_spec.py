@@ -26,6 +26,10 @@ from .catalogue import (HEAT_SOURCE_KINDS, LIMIT_NODE, SHARE_SUM_TOLERANCE, SOUR
                         source_value_default)
 
 AMBIENT = "ambient"
+# A second boundary: the room around a liquid-cooled motor (its temperature: a recording's ``room_c``, else
+# ``[thermal] room_c``, else the ambient).  A link to it is the ``room_link`` term.
+ROOM = "room"
+BOUNDARIES = (AMBIENT, ROOM)
 
 
 @dataclass(frozen=True)
@@ -36,7 +40,7 @@ class NodeSpec:
 
 @dataclass(frozen=True)
 class LinkSpec:
-    """A thermal resistance between two nodes; the second may be ``"ambient"``."""
+    """A thermal resistance between two nodes; the second may be a boundary (``"ambient"``, ``"room"``)."""
 
     between: tuple[str, str]
     resistance_k_per_w: object
@@ -169,10 +173,10 @@ def _only_keys(source: str, where: str, table: Mapping[str, Any], known: tuple[s
 
 
 def check_node_name(source: str, where: str, name: Any) -> str:
-    """``name`` when it is a valid node name (an identifier other than ``ambient``); InputError otherwise."""
-    if not isinstance(name, str) or not name.isidentifier() or name == AMBIENT:
+    """``name`` when it is a valid node name (an identifier other than a boundary's); InputError otherwise."""
+    if not isinstance(name, str) or not name.isidentifier() or name in BOUNDARIES:
         raise InputError(source, where, repr(name), "a node name is a valid identifier (letters, digits, _; not "
-                         f"starting with a digit) other than {AMBIENT!r}")
+                         f"starting with a digit) other than {' or '.join(map(repr, BOUNDARIES))}")
     return name
 
 
@@ -199,9 +203,10 @@ def _read_links(source: str, sec: Mapping[str, Any], nodes: tuple[str, ...]) -> 
         _only_keys(source, f"thermal.link[{k}]", table, ("between", "resistance_k_per_w"))
         pair = table.get("between")
         if (not isinstance(pair, list) or len(pair) != 2 or pair[0] == pair[1]
-                or not all(p in (*nodes, AMBIENT) for p in pair) or pair[0] == AMBIENT):
+                or not all(p in (*nodes, *BOUNDARIES) for p in pair) or pair[0] in BOUNDARIES):
             raise InputError(source, f"thermal.link[{k}].between", repr(pair),
-                             f"expected [node, node or {AMBIENT!r}], two different nodes of {', '.join(nodes)}")
+                             f"expected [node, node or {' or '.join(map(repr, BOUNDARIES))}], two different nodes "
+                             f"of {', '.join(nodes)}")
         key = "-".join(pair)
         if _find_link(links, key) is not None:
             raise InputError(source, f"thermal.link[{k}].between", repr(pair), "these nodes are linked twice")
@@ -214,8 +219,8 @@ def _read_links(source: str, sec: Mapping[str, Any], nodes: tuple[str, ...]) -> 
 
 
 def _check_grounded(source: str, nodes: tuple[str, ...], links) -> None:
-    """Every node reaches ambient through links: a floating node has no sink, and no steady state."""
-    reached, frontier = {AMBIENT}, [AMBIENT]
+    """Every node reaches a boundary through links: a floating node has no sink, and no steady state."""
+    reached, frontier = set(BOUNDARIES), list(BOUNDARIES)
     while frontier:
         here = frontier.pop()
         for link in links:
@@ -226,7 +231,7 @@ def _check_grounded(source: str, nodes: tuple[str, ...], links) -> None:
                     frontier.append(other)
     floating = [n for n in nodes if n not in reached]
     if floating:
-        raise InputError(source, "thermal.link", ", ".join(floating), "floating: not connected to ambient through "
+        raise InputError(source, "thermal.link", ", ".join(floating), "floating: not connected to ambient (or the room) through "
                          "links (its heat has no way out); add a link")
 
 

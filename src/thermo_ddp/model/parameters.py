@@ -49,7 +49,8 @@ class ThermalParameters:
     ``values`` holds the model's keys (:data:`THERMAL_KEYS`) and the optional ones given
     (:data:`THERMAL_OPTIONAL`; absent ones read as their defaults), ``sensor`` and ``friction_heat_node``
     the optional node choices (None: absent, see :data:`THERMAL_NODE_CHOICES`).  A general network
-    (``model = "network"``): ``network`` holds nodes, links and sources, ``sensor`` names a node.
+    (``model = "network"``): ``network`` holds nodes, links and sources, ``sensor`` names a node, ``room_c``
+    the room's temperature for links to ``"room"`` when a recording gives none (None: absent, the ambient's).
     Values may be CasADi symbols (identification)."""
 
     model: str
@@ -58,6 +59,7 @@ class ThermalParameters:
     sensor: str | None = None
     friction_heat_node: str | None = None
     network: NetworkSpec | None = None
+    room_c: float | None = None
 
     def __getitem__(self, key: str) -> float:
         if self.network is not None:
@@ -102,7 +104,8 @@ class ThermalParameters:
         """The [thermal] section: model, ambient, the node choices and values given (or the network)."""
         choices = {k: getattr(self, k) for k in THERMAL_NODE_CHOICES if getattr(self, k) is not None}
         inner = self.network.to_dict() if self.network is not None else self.values
-        return {"model": self.model, "ambient_c": self.ambient_c, **choices, **inner}
+        room = {} if self.room_c is None else {"room_c": self.room_c}
+        return {"model": self.model, "ambient_c": self.ambient_c, **room, **choices, **inner}
 
 
 @dataclass(frozen=True)
@@ -258,7 +261,7 @@ def _thermal(source: str, sec: Mapping[str, Any]) -> ThermalParameters:
 def _network_thermal(source: str, sec: Mapping[str, Any], ambient_c: float) -> ThermalParameters:
     """A ``model = "network"`` section: its tables (:func:`read_network`) and the ``sensor`` node (required)."""
     for key in sec:
-        if key not in ("model", "ambient_c", "sensor", "node", "link", "source"):
+        if key not in ("model", "ambient_c", "room_c", "sensor", "node", "link", "source"):
             raise InputError(source, f"thermal.{key}", sec[key], "unknown key of a network (its heat is in "
                              "[[thermal.source]], its nodes in [[thermal.node]], its links in [[thermal.link]])")
     network = read_network(source, sec)
@@ -266,7 +269,8 @@ def _network_thermal(source: str, sec: Mapping[str, Any], ambient_c: float) -> T
     if sensor not in network.node_names:
         raise InputError(source, "thermal.sensor", repr(sensor), "name the node the recording's temperature_c "
                          f"measures, one of {', '.join(network.node_names)}")
-    return ThermalParameters(NETWORK_MODEL, ambient_c, {}, sensor, network=network)
+    room = checked_value(source, "thermal.room_c", "room_c", sec["room_c"]) if "room_c" in sec else None
+    return ThermalParameters(NETWORK_MODEL, ambient_c, {}, sensor, network=network, room_c=room)
 
 
 def _sources_text(source: str, data: Mapping[str, Any]) -> dict[str, str]:

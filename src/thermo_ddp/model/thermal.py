@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 
 from . import motor
-from .network_spec import AMBIENT, LinkSpec, NetworkSpec, NodeSpec, SourceSpec, literal_zero
+from .network_spec import AMBIENT, BOUNDARIES, ROOM, LinkSpec, NetworkSpec, NodeSpec, SourceSpec, literal_zero
 from .parameters import ThermalParameters
 
 
@@ -28,10 +28,11 @@ class Link:
 
 @dataclass(frozen=True)
 class HeatSource:
-    """Power ``constant_w + gain * (power[name] / reference) ** exponent`` injected at ``node``.
+    """Power ``constant_w + gain * power[name] ** exponent / reference ** reference_exponent`` injected at
+    ``node`` (``reference_exponent`` None: ``exponent``).
 
-    ``name`` refers to a loss or loss driver of ``motor.losses_w`` (``joule_w``, ``friction_w``,
-    ``current_sq_a2``, ``speed_abs_rad_s``), None for a constant.  A caller that holds inputs over an
+    ``name`` refers to a loss or loss driver of ``motor.losses_w`` (``joule_w``, ``ac_joule_w``,
+    ``friction_w``, ``current_sq_a2``, ``speed_abs_rad_s``), None for a constant.  A caller that holds inputs over an
     interval may pass the interval mean of ``power[name] ** exponent`` under :attr:`feature` (a numeric
     exponent).  ``kind`` is the file's heat-source kind (``copper``, ``iron_losses``, ...) and ``term``
     the file's source name (None: its kind), so that a numeric network can be written back as a file
@@ -46,6 +47,7 @@ class HeatSource:
     reference: object = 1.0
     kind: str | None = None
     term: str | None = None
+    reference_exponent: object = None
 
     @property
     def feature(self) -> str | None:
@@ -57,7 +59,8 @@ class HeatSource:
             return self.constant_w
         driver = powers[self.feature] if self.feature in powers else _power(powers[self.name], self.exponent)
         if not (isinstance(self.reference, (int, float)) and self.reference == 1):
-            driver = driver / self.reference ** self.exponent
+            driver = driver / self.reference ** (self.exponent if self.reference_exponent is None
+                                                 else self.reference_exponent)
         return self.constant_w + self.gain * driver
 
 
@@ -86,7 +89,8 @@ class ThermalNetwork:
     """A lumped network: ``nodes`` with heat capacities (J/K), thermal resistances between them or to
     ambient (``links``), heat ``sources`` injected at nodes, the node the sensor measures (``sensor_node``)
     and the node the temperature limit applies to (``limit_node``). Its state is one temperature per node,
-    in °C, in the order of ``nodes`` (:attr:`state_names`)."""
+    in °C, in the order of ``nodes`` (:attr:`state_names`).  ``room_c``: the temperature of the second
+    boundary (``"room"``) when a caller gives none (None: the ambient's)."""
 
     nodes: tuple[str, ...]
     capacities_j_per_k: tuple[object, ...]
@@ -94,9 +98,10 @@ class ThermalNetwork:
     sources: tuple[HeatSource, ...]
     sensor_node: str
     limit_node: str = "winding"
+    room_c: object = None
 
     def __post_init__(self):
-        known = set(self.nodes) | {AMBIENT}
+        known = set(self.nodes) | set(BOUNDARIES)
         for link in self.links:
             if link.a not in known or link.b not in known:
                 raise ValueError(f"thermal link {link.a}-{link.b}: unknown node (nodes: {self.nodes})")
@@ -113,15 +118,16 @@ class ThermalNetwork:
     def index(self, node: str) -> int:
         return self.nodes.index(node)
 
-    def rhs(self, temperatures_c, powers: Mapping[str, object], ambient_c):
-        """dT/dt of every node, as a CasADi expression (or numbers)."""
+    def rhs(self, temperatures_c, powers: Mapping[str, object], ambient_c, room_c=None):
+        """dT/dt of every node, as a CasADi expression (or numbers); ``room_c`` None: :attr:`room_c`."""
         t = {n: temperatures_c[i] for i, n in enumerate(self.nodes)}
         t[AMBIENT] = ambient_c
+        t[ROOM] = next(r for r in (room_c, self.room_c, ambient_c) if r is not None)
         heat = {n: 0 for n in self.nodes}
         for link in self.links:
             flow = (t[link.a] - t[link.b]) / link.resistance_k_per_w
             heat[link.a] = heat[link.a] - flow
-            if link.b != AMBIENT:
+            if link.b not in BOUNDARIES:
                 heat[link.b] = heat[link.b] + flow
         for src in self.sources:
             heat[src.node] = heat[src.node] + src.power_w(powers)
@@ -137,28 +143,31 @@ class ThermalNetwork:
 
 
 def joint_heat_rhs(network: ThermalNetwork, motor_params, temperatures_c, current_a, velocity_rad_s, ambient_c,
-                   held: Mapping[str, object] | None = None):
+                   held: Mapping[str, object] | None = None, room_c=None):
     """dT/dt of one joint's network heated by its motor's losses (R(T) at the limit node, the winding).
 
     The one place where motor losses meet a thermal network: the model, the whole-arm hold, the
     observer and identification all call it (``motor_params`` may hold CasADi symbols). ``held``
     replaces losses by their means over a zero-order-hold interval (keys: ``HeatSource.feature``;
-    the mean friction power of an interval is not the friction power of its mean speed)."""
+    the mean friction power of an interval is not the friction power of its mean speed); ``room_c``: the
+    room's temperature (None: the network's)."""
     winding_c = temperatures_c[network.index(network.limit_node)]
-    losses = motor.losses_w(motor_params, current_a, velocity_rad_s, winding_c) | dict(held or {})
-    return network.rhs(temperatures_c, losses, ambient_c)
+    losses = motor.losses_w(motor_params, current_a, velocity_rad_s, winding_c, held)
+    return network.rhs(temperatures_c, losses, ambient_c, room_c)
 
 
 @dataclass(frozen=True)
 class Driver:
     """One term of a heat-source kind: ``gain_key``'s value times the driver ``name`` (``None``: a gain of
     1), raised to ``exponent`` (a number, or the kind's value key that holds it), plus ``constant_key``'s
-    value; :data:`REFERENCE` names the value the driver is divided by."""
+    value; :data:`REFERENCE` names the value the driver is divided by, raised to ``reference_exponent``
+    (None: ``exponent``)."""
 
     gain_key: str | None
     name: str | None
     exponent: float | str = 1.0
     constant_key: str | None = None
+    reference_exponent: float | None = None
 
 
 # The powers of the file's heat-source kinds (catalogue.SOURCE_KINDS), term by term; written once.
@@ -170,8 +179,9 @@ DRIVERS: dict[str, tuple[Driver, ...]] = {
                          Driver("motor_fraction", "friction_w")),                # + f tau_f(w) w
     "drive_heating": (Driver("loss_w_per_a2", "current_sq_a2", 1.0, "idle_w"),),  # P_idle + k i^2
     "constant": (Driver(None, None, 1.0, "power_w"),),
+    "ac_copper": (Driver("factor", "ac_joule_w", 1.0, reference_exponent=2.0),),  # k R(T_w) i^2 (w / w_ref)^2
 }
-REFERENCE = {"iron_losses": "ref_speed_rad_s"}
+REFERENCE = {"iron_losses": "ref_speed_rad_s", "ac_copper": "ref_speed_rad_s"}
 _WHOLE = "<whole>"  # the gain of a term without a value of its own (copper: all of R i^2)
 
 
@@ -186,7 +196,8 @@ def heat_sources(spec: SourceSpec) -> tuple[HeatSource, ...]:
             gain = 0.0 if d.name is None else share * (1.0 if d.gain_key is None else spec[d.gain_key])
             constant = 0.0 if d.constant_key is None else share * spec[d.constant_key]
             if not (literal_zero(gain) and literal_zero(constant)):
-                out.append(HeatSource(node, d.name, gain, constant, exponent, reference, spec.kind, spec.name))
+                out.append(HeatSource(node, d.name, gain, constant, exponent, reference, spec.kind, spec.name,
+                                      d.reference_exponent))
     return tuple(out)
 
 
@@ -198,7 +209,7 @@ def network_from_parameters(th: ThermalParameters) -> ThermalNetwork:
     links = tuple(Link(*k.between, k.resistance_k_per_w) for k in spec.links)
     sources = tuple(h for s in spec.sources for h in heat_sources(s))
     return ThermalNetwork(spec.node_names, tuple(n.capacity_j_per_k for n in spec.nodes), links, sources,
-                          sensor_node=th.sensor_node)
+                          sensor_node=th.sensor_node, room_c=th.room_c)
 
 
 def thermal_parameters_from_network(network: ThermalNetwork, ambient_c: float,
@@ -216,7 +227,8 @@ def thermal_parameters_from_network(network: ThermalNetwork, ambient_c: float,
         groups.setdefault(src.term or src.kind, []).append(src)
     sources = tuple(_source_spec(label, group) for label, group in groups.items())
     spec = NetworkSpec(nodes, links, sources)
-    return ThermalParameters("network", float(ambient_c), {}, sensor or network.sensor_node, network=spec)
+    room = None if network.room_c is None else float(network.room_c)
+    return ThermalParameters("network", float(ambient_c), {}, sensor or network.sensor_node, network=spec, room_c=room)
 
 
 def _source_spec(label: str, group: list[HeatSource]) -> SourceSpec:
@@ -236,7 +248,9 @@ def _source_spec(label: str, group: list[HeatSource]) -> SourceSpec:
                 amounts.setdefault(d.constant_key, {}).setdefault(h.node, 0.0)
                 amounts[d.constant_key][h.node] += float(h.constant_w)
             if isinstance(d.exponent, str):
-                values |= {d.exponent: float(h.exponent), REFERENCE[kind]: float(h.reference)}
+                values[d.exponent] = float(h.exponent)
+            if kind in REFERENCE:
+                values[REFERENCE[kind]] = float(h.reference)
     totals = {key: sum(per.values()) for key, per in amounts.items()}
     base = next((key for key, total in totals.items() if total != 0), None)
     if base is None:

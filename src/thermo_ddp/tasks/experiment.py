@@ -120,7 +120,7 @@ def _functions(model, params, dt_s: float, explanations: int, rise_k_per_w: floa
     p = ca.SX.sym("p", 2 + pairs)
     drivers = _drivers(params)(u[0], u[1])
     h = dt_s / SUBSTEPS
-    inputs = ca.vertcat(h, drivers[:3], p[0], drivers[3:])
+    inputs = ca.vertcat(h, drivers[:3], p[0], drivers[3:], p[0])  # INPUT_ROWS: the room at the ambient
     z = x
     for _ in range(SUBSTEPS):
         z = model.step(ca.vertcat(z, ca.SX.zeros(n * (q + 1))), inputs, th)[:n]
@@ -257,7 +257,8 @@ def _knot_grid(design: _Design, us: np.ndarray) -> ThermalGrid:
     params, n = design.expl.model.params, us.shape[0]
     drivers = np.array(_drivers(params)(np.r_[0.0, us[:, 0]][None, :], np.r_[0.0, us[:, 1]][None, :]))
     steps = np.r_[1e-6, np.full(n, design.dt_s / SUBSTEPS)]
-    cols = np.vstack([steps, drivers[:3], np.full(n + 1, design.ambient_c), drivers[3:]])
+    ambient = np.full(n + 1, design.ambient_c)
+    cols = np.vstack([steps, drivers[:3], ambient, drivers[3:], ambient])  # INPUT_ROWS: the room at the ambient
     inputs = np.hstack([cols[:, :1], np.repeat(cols[:, 1:], SUBSTEPS, axis=1)])
     time_s = np.arange(n + 1) * design.dt_s
     return ThermalGrid("design", time_s, np.zeros(n + 1), np.r_[us[:, 0], 0.0], np.r_[us[:, 1], 0.0], inputs,
@@ -455,7 +456,7 @@ def design_experiment(recordings, parameters=None, settings: ExperimentSettings 
 
 def _rest(expl: Explanations, ambient_c: float):
     rest = np.zeros(len(INPUT_ROWS))
-    rest[INPUT_ROWS.index("ambient_c")] = ambient_c
+    rest[[INPUT_ROWS.index("ambient_c"), INPUT_ROWS.index("room_c")]] = ambient_c
     return rest, expl.theta(expl.reference)
 
 
