@@ -17,11 +17,15 @@ def split(rho, G):
     return rho[:ng], rho[ng:]
 
 
+def phr(g, lam, rho, maximum=np.maximum):
+    """Each row's (max(0, lam + rho g)^2 - lam^2) / (2 rho); ``maximum``: ``casadi.fmax`` for symbols."""
+    return (maximum(0.0, lam + rho * g) ** 2 - lam ** 2) / (2 * rho)
+
+
 def terms(G, GN, lam, lamN, rho) -> float:
-    """sum (max(0, lam + rho g)^2 - lam^2) / (2 rho) over the stage and terminal constraints."""
+    """The sum of :func:`phr` over the stage and terminal constraints."""
     rg, rN = split(rho, G)
-    return float(np.sum((np.maximum(0.0, lam + rg * G) ** 2 - lam ** 2) / (2 * rg))
-                 + np.sum((np.maximum(0.0, lamN + rN * GN) ** 2 - lamN ** 2) / (2 * rN)))
+    return float(np.sum(phr(G, lam, rg)) + np.sum(phr(GN, lamN, rN)))
 
 
 def multipliers(G, GN, lam, lamN, rho):

@@ -1,8 +1,7 @@
 """The DDP passes on whole trajectories: compiled C loops over a runtime horizon, CasADi mapaccum, or numpy.
 
 Every backend offers the same calls on whole trajectories, as C-contiguous numpy arrays with one
-row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps):
-(rho: the penalties of the rows of g and then of g_N, one vector)
+row per knot (X (N+1, nx), U (N, nu), P (N+1, np), Lam (N, ng), C (N, nx) gaps; rho: penalties of g, then g_N):
   backward(X, U, P, Lam, LamN, C, rho, reg) -> (policy (N, n_policy), summary [d1, d2, stat, pivot],
                                                 values (N+1, n_value))
   evaluate_backward(X, U, P, Lam, LamN, rho, reg) -> ((J, G, GN, C), backward's outputs): both in
@@ -32,6 +31,7 @@ import numpy as np
 
 from .. import codegen
 from . import _pass_cache
+from ._augmented_lagrangian import phr
 from ._layout import Layout
 from ._riccati import NumpyOps, SymOps, backward_step, first_order_step, gradient_step, knot_model
 
@@ -86,8 +86,7 @@ def _fused_knots(problem, settings, layout, knots):
     return [step, eval_step]
 
 
-# The knots the C driver calls (and "hess"): the local model once per knot, then the Riccati step; the first-order
-# step in one function.
+# The knots the C driver calls (and "hess"): the local model, then the Riccati step; the first-order step in one.
 COMPILED = ("local", "local_eval", "back_core", "grad_first", "terminal", "fwd", "eval", "end")
 MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
@@ -209,14 +208,13 @@ def _gradient_knot(problem, layout, knots, model_in, compiled):
     composed = None if compiled else ca.Function("ddp_grad_composed", [a, x, u, p, lam, rho, pol],
                            core(a, knots["local"](x, u, p, lam, rho), u, pol),
                            ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"], _CSE)
-    # The compiled pass: the same step from one reverse sweep of the knot's Lagrangian l + a'f, without the packed
-    # local model's Jacobians and Hessians (the rk4_4 lift's knot: 2,380 -> 1,918 instructions; with rows composed
-    # with the step, as the MPC's were: 7,272 -> 2,964).
+    # The compiled pass: the same step from one reverse sweep of the knot's Lagrangian l + a'f, without the local
+    # model's Jacobians and Hessians (rk4_4 lift knot: 2,380 -> 1,918 instructions; rows composed with the step:
+    # 7,272 -> 2,964).
     F, z = problem.functions, ca.vertcat(x, u)
     lagrangian = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(a, F.step(x, u, p))
     if problem.n_constraints:
-        g = F.stage_constraint(x, u, p)
-        lagrangian += ca.sum1((ca.fmax(0, lam + rho * g) ** 2 - lam ** 2) / (2 * rho))
+        lagrangian += ca.sum1(phr(F.stage_constraint(x, u, p), lam, rho, ca.fmax))
     Lz = ca.gradient(lagrangian, z)
     first = first_order_step(SymOps, Lz[:nx], Lz[nx:], K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), problem.has_box)
     knots["grad_first"] = _function("ddp_grad_first_knot", [a, x, u, p, lam, rho, pol], list(first),
