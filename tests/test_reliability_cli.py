@@ -307,13 +307,13 @@ def test_outputs_get_the_permissions_of_a_plain_new_file(tmp_path):
 def test_a_run_that_fails_midway_is_exit_1_one_line_not_bad_input(tmp_path, capsys, monkeypatch):
     """The loop's diagnosis failing after the experiments is a failed run (exit 1), not bad input (exit 2);
     the output folder is not created."""
-    from thermo_ddp.errors import RunFailed
+    from types import SimpleNamespace
+
     from thermo_ddp.studies import loop
 
-    def failing(*args, **kwargs):
-        raise RunFailed("the loop's diagnosis", "model_does_not_fit", "no candidate explains these recordings")
-
-    monkeypatch.setattr(loop, "identify_models", failing)
+    failed = SimpleNamespace(success=False, status="model_does_not_fit",
+                             message="no candidate explains these recordings")
+    monkeypatch.setattr(loop, "diagnose_thermal", lambda *args, **kwargs: failed)
     monkeypatch.setattr(loop, "record_experiments", lambda robot, settings: ())
     out = tmp_path / "run"
     assert main(["loop", "--short", "--out", str(out)]) == 1
