@@ -20,8 +20,9 @@ $(STAMP): pyproject.toml
 plan: $(STAMP)
 	$(VENV)/bin/thermo-ddp compare --payload-kg 40 --hold-s 60
 
+# Two workers (the 2-core machine the suite is sized for), a test file per worker at a time (its fixtures shared).
 test: $(STAMP) $(DOCS_STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 # The documentation site: the docs extra (Sphinx, MyST, furo) into .venv, then the HTML into docs/_build/html,
 # every warning an error (a docstring autodoc cannot read, a broken link, a public name with no API entry);

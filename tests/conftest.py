@@ -40,8 +40,13 @@ def run_notebook(name: str, out_dir: Path, monkeypatch) -> str:
 
 @pytest.fixture(autouse=True, scope="session")
 def _codegen_cache(tmp_path_factory):
-    """Compiled libraries go to a per-run cache unless the caller chose one."""
-    os.environ.setdefault("THERMO_DDP_CACHE", str(tmp_path_factory.mktemp("codegen_cache")))
+    """Compiled libraries go to a per-run cache unless the caller chose one, shared by the run's xdist workers
+    (the cache is safe for concurrent builders: codegen.py)."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # each worker's base is <run>/popen-gwN
+    (root / "codegen_cache").mkdir(exist_ok=True)
+    os.environ.setdefault("THERMO_DDP_CACHE", str(root / "codegen_cache"))
 
 
 @pytest.fixture(scope="session")
