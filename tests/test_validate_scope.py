@@ -143,6 +143,11 @@ def test_cli_validate_reports_scope_keys_and_says_when_outside(tmp_path, synthet
     assert set(d["per_sensor"]) == {"winding", "tooth", "yoke"} and d["band_k"] == 0.0
     assert d["envelope"]["known"] and not validate_thermal([rec], _params()).to_dict()["envelope"]["known"]
     assert "used where it was never identified: current_a" in capsys.readouterr().out
+    unc = {"uncertainty": {"motor.resistance_ohm": [0.98 * R_OHM, 1.02 * R_OHM]}}
+    own = {k: list(v) for k, v in envelope_of([rec]).items()}
+    outside, inside = (validate_thermal([rec], _params(envelope=e, **unc)) for e in (env, own))
+    assert outside.band_k > 0 and outside.band_k == pytest.approx(inside.band_k)
+    assert "outside the envelope: the values" in outside.report() and "outside the envelope" not in inside.report()
 
 
 def test_paderborn_profile_60_lies_outside_a_file_identified_on_profile_24(tmp_path):

@@ -174,7 +174,9 @@ class Validation:
                 lines.append("per sensor: " + ", ".join(f"{n} {v['rmse']:.3g} K" for n, v in self.per_sensor.items()))
             lines += [f"alternative {'+'.join(a.terms)}: rmse {a.rmse:.3g} K" for a in self.alternatives]
             if self.band_k > 0:
-                lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart")
+                lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart"
+                             + (" (outside the envelope: the values the identification could not pin down are not in "
+                                "it, the error may be larger)" if self.envelope.outside else ""))
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 4) -> Path:
