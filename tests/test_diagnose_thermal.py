@@ -294,6 +294,13 @@ def test_suggested_experiments_are_worded_from_the_motors_own_recorded_range():
                                                 velocity=np.full_like(t, 2.0), temperature_c=30 + 0 * t), ELBOW)],
                         ELBOW)
     assert "gearbox" in elbow["iron_losses"] and "2 rad/s" in elbow["iron_losses"]
+    from thermo_ddp.diagnose._thermal_terms import beyond_envelope
+    from thermo_ddp.envelope import envelope_of
+    rec = Recording(name="pmsm", time_s=t, current_a=current, velocity=speed, temperature_c=30 + 0 * t,
+                    ambient_c=np.linspace(16.5, 20.6, t.size))
+    beyond, speeds = beyond_envelope(envelope_of([rec]))  # the network diagnosis' not_determinable
+    assert "576 rad/s" in beyond and "200 A" in beyond and "16.5-20.6 °C" in beyond and "230 and 576 rad/s" in speeds
+    assert beyond_envelope({}) == ("recordings at other speeds, currents and ambient (coolant) temperatures than these", "")
 
 
 def test_white_noise_temperature_is_not_diagnosed_as_fine():

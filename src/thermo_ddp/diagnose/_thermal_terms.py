@@ -69,6 +69,17 @@ def experiments(grids: Sequence, params: JointParameters) -> dict[str, str]:
     }
 
 
+def beyond_envelope(envelope) -> tuple[str, str]:
+    """(the recordings that would pin down what these could not, two speeds to try) worded from the operating
+    range the recordings covered (``envelope``: :func:`~thermo_ddp.envelope.envelope_of`); without it, in general."""
+    ranged = {"speed_rad_s", "current_a", "ambient_c"} <= set(envelope)
+    beyond = "recordings at other speeds, currents and ambient (coolant) temperatures than these" + (
+        f" (speed up to {envelope['speed_rad_s'][1]:.3g} rad/s, current up to {envelope['current_a'][1]:.3g} A, "
+        f"ambient_c {envelope['ambient_c'][0]:.3g}-{envelope['ambient_c'][1]:.3g} °C)" if ranged else "")
+    top = envelope["speed_rad_s"][1] if "speed_rad_s" in envelope else 0.0
+    return beyond, (f" (e.g. {0.4 * top:.3g} and {top:.3g} rad/s)" if top > 0 else "")
+
+
 def room_note(texts: dict[str, str]) -> dict:
     """Without a room thermometer a steady heat on the sensor node and a room warmer than the file's
     ambient_c are one and the same (exactly so for one node): the drive heat is then fitted in every model
