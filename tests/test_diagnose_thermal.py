@@ -274,6 +274,35 @@ def test_physical_ranges_follow_the_motor_in_the_parameter_file():
     assert pmsm["drive_heating"].bounds["drive_idle_w"][1] == pytest.approx(5 * motor.resistance_ohm * 210.0 ** 2)
 
 
+def test_suggested_experiments_are_worded_from_the_motors_own_recorded_range():
+    """The experiments speak of this motor's speeds and currents (95th percentiles of the recording), and of a
+    gearbox only on a geared joint: a traction PMSM at 576 rad/s and 200 A is not asked for 2 rad/s."""
+    from thermo_ddp.diagnose._thermal_terms import experiments
+    from thermo_ddp.identify.thermal_data import thermal_grid
+    from thermo_ddp.model.parameters import load_parameters, packaged_parameter_file
+
+    t = np.arange(0.0, 600.0, 2.0)
+    speed, current = np.where(t < 300, 576.0, 288.0), np.where(t < 300, 200.0, 100.0)
+    pmsm = load_parameters(packaged_parameter_file("paderborn_pmsm"))
+    grid = thermal_grid(Recording(name="pmsm", time_s=t, current_a=current, velocity=speed, temperature_c=30 + 0 * t),
+                        pmsm)
+    texts = experiments([grid], pmsm)
+    assert "576 rad/s" in texts["iron_losses"] and "288 rad/s" in texts["iron_losses"]
+    assert "gearbox" not in texts["iron_losses"] and "2 rad/s" not in texts["friction_heating"]
+    assert "80 A" in texts["copper_resistance"] and "160 A" in texts["copper_resistance"]
+    elbow = experiments([thermal_grid(Recording(name="elbow", time_s=t, current_a=np.full_like(t, 4.0),
+                                                velocity=np.full_like(t, 2.0), temperature_c=30 + 0 * t), ELBOW)],
+                        ELBOW)
+    assert "gearbox" in elbow["iron_losses"] and "2 rad/s" in elbow["iron_losses"]
+    from thermo_ddp.diagnose._thermal_terms import beyond_envelope
+    from thermo_ddp.envelope import envelope_of
+    rec = Recording(name="pmsm", time_s=t, current_a=current, velocity=speed, temperature_c=30 + 0 * t,
+                    ambient_c=np.linspace(16.5, 20.6, t.size))
+    beyond, speeds = beyond_envelope(envelope_of([rec]))  # the network diagnosis' not_determinable
+    assert "576 rad/s" in beyond and "200 A" in beyond and "16.5-20.6 °C" in beyond and "230 and 576 rad/s" in speeds
+    assert beyond_envelope({}) == ("recordings at other speeds, currents and ambient (coolant) temperatures than these", "")
+
+
 def test_white_noise_temperature_is_not_diagnosed_as_fine():
     """A temperature of pure noise (tens of kelvin between samples) is fitted 'to within its noise' by any
     model: that is no diagnosis. The fuzzer's silent-garbage class (issue 14)."""

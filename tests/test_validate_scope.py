@@ -77,20 +77,31 @@ def test_per_sensor_errors_against_a_known_truth(synthetic):
     assert biased.to_dict()["per_sensor"]["tooth"]["rmse"] == biased.per_sensor["tooth"]["rmse"]
 
 
-def test_the_first_order_band_matches_the_box_vertices(synthetic):
-    """Narrow intervals (+-2 %): the first-order band equals the widest spread over the box's vertices
-    to second order."""
+def test_the_band_combines_each_values_exact_spread_in_quadrature(synthetic):
+    """Narrow intervals (+-2 %): the first-order band equals, to second order, the quadrature sum of each
+    value's own spread (each moved alone to its bounds, simulated exactly), and lies between the largest
+    single spread and the spread over the box's vertices (every value at a bound at once)."""
     paths = {"thermal.node.tooth.capacity_j_per_k": C["tooth"], "thermal.link.yoke-ambient.resistance_k_per_w": R_YA,
              "motor.resistance_ohm": R_OHM}
     box = {k: [0.98 * v, 1.02 * v] for k, v in paths.items()}
     rec = _recording(synthetic)
     result = validate_thermal([rec], _params(uncertainty=box))
-    corners = [dict(zip(box, (box[k][(n >> j) & 1] for j, k in enumerate(box)))) for n in range(2 ** len(box))]
     base = _params()
-    runs = np.array([validate_thermal([rec], base.with_values(c).checked()).predictions[0].predicted_c for c in corners])
-    spread = float(np.max(runs.max(axis=0) - runs.min(axis=0)))
-    assert spread > 1.0
-    assert result.band_k == pytest.approx(spread, rel=1e-3)
+
+    def run(values):
+        return validate_thermal([rec], base.with_values(values).checked()).predictions[0].predicted_c
+    nominal = run({})
+    shifts = np.array([[run({k: box[k][j]}) - nominal for j in (0, 1)] for k in box])  # values x bound x samples
+    up = np.sqrt(np.sum(np.maximum(shifts.max(axis=1), 0) ** 2, axis=0))
+    down = np.sqrt(np.sum(np.minimum(shifts.min(axis=1), 0) ** 2, axis=0))
+    quadrature = float(np.max(up + down))
+    corners = [dict(zip(box, (box[k][(n >> j) & 1] for j, k in enumerate(box)))) for n in range(2 ** len(box))]
+    runs = np.array([run(c) for c in corners])
+    vertices = float(np.max(runs.max(axis=0) - runs.min(axis=0)))
+    single = float(np.max(np.abs(shifts[:, 1] - shifts[:, 0])))
+    assert single > 0.5 and vertices > quadrature * 1.2  # three values that matter: the corner is wider
+    assert result.band_k == pytest.approx(quadrature, rel=2e-3)
+    assert single < result.band_k < vertices
 
 
 def test_alternatives_are_predicted_and_widen_the_band(synthetic):
@@ -132,6 +143,11 @@ def test_cli_validate_reports_scope_keys_and_says_when_outside(tmp_path, synthet
     assert set(d["per_sensor"]) == {"winding", "tooth", "yoke"} and d["band_k"] == 0.0
     assert d["envelope"]["known"] and not validate_thermal([rec], _params()).to_dict()["envelope"]["known"]
     assert "used where it was never identified: current_a" in capsys.readouterr().out
+    unc = {"uncertainty": {"motor.resistance_ohm": [0.98 * R_OHM, 1.02 * R_OHM]}}
+    own = {k: list(v) for k, v in envelope_of([rec]).items()}
+    outside, inside = (validate_thermal([rec], _params(envelope=e, **unc)) for e in (env, own))
+    assert outside.band_k > 0 and outside.band_k == pytest.approx(inside.band_k)
+    assert "outside the envelope: the values" in outside.report() and "outside the envelope" not in inside.report()
 
 
 def test_paderborn_profile_60_lies_outside_a_file_identified_on_profile_24(tmp_path):

@@ -13,10 +13,16 @@ The file's scope is reported too: the recordings against its ``[envelope]`` (:mo
 the prediction of each ``[[alternatives]]``, and ``band_k``, the widest spread of the sensor's prediction
 that the ``[uncertainty]`` intervals and the alternatives allow.  The intervals enter to first order: at
 each sample the prediction's sensitivity J to each uncertain value (CasADi derivatives through the whole
-simulation) spans [y + sum min(J (lo - x), J (hi - x)), y + sum max(...)]; the alternatives' predictions
-widen that band; ``band_k`` is its largest width over every sample.  First order is exact for the
-capacities' and resistances' small intervals only approximately (the network is nonlinear in them):
-the band is an estimate, not a guarantee.
+simulation) moves it by J (lo - x) and J (hi - x); the values' shifts are combined in quadrature, one side
+at a time (y - sqrt(sum of the squared downward shifts), y + sqrt(sum of the squared upward shifts)): the
+95 % interval of the prediction when the values' errors are independent (GUM, JCGM 100:2008 eq. 10), not
+the corner of the box where every value sits at its 95 % bound at once (probability 0.05^k: with a dozen
+fitted values that corner spread hundreds of kelvins on Paderborn profiles predicted within 2 K).  The
+alternatives' predictions widen that band; ``band_k`` is its largest width over every sample.  The file
+holds each value's interval, not their correlations: values whose errors compensate in the fit make the
+band too wide, values the data do not pin down (no interval) leave it too narrow where the recording lies
+outside the envelope.  First order is exact only for small intervals (the network is nonlinear in its
+capacities and resistances): the band is an estimate, not a guarantee.
 """
 from __future__ import annotations
 
@@ -168,7 +174,9 @@ class Validation:
                 lines.append("per sensor: " + ", ".join(f"{n} {v['rmse']:.3g} K" for n, v in self.per_sensor.items()))
             lines += [f"alternative {'+'.join(a.terms)}: rmse {a.rmse:.3g} K" for a in self.alternatives]
             if self.band_k > 0:
-                lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart")
+                lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart"
+                             + (" (outside the envelope: the values the identification could not pin down are not in "
+                                "it, the error may be larger)" if self.envelope.outside else ""))
         return "\n".join(lines)
 
     def plot(self, path: str | Path, max_recordings: int = 4) -> Path:
@@ -245,7 +253,8 @@ def _predict(sim: _Simulator, grid: ThermalGrid, measured: Mapping[str, np.ndarr
 def _band(params: JointParameters, sim: _Simulator, grid, measured, nominal: np.ndarray,
           others: Sequence[np.ndarray]) -> float:
     """The widest spread of the sensor's prediction over this recording: first-order in the
-    ``[uncertainty]`` intervals, widened by the alternatives' predictions ``others`` (module docstring)."""
+    ``[uncertainty]`` intervals combined in quadrature, widened by the alternatives' predictions ``others``
+    (module docstring)."""
     lower, upper = nominal.copy(), nominal.copy()
     if sim.paths:
         p = ca.MX.sym("p", len(sim.paths))
@@ -253,8 +262,9 @@ def _band(params: JointParameters, sim: _Simulator, grid, measured, nominal: np.
         x = np.array([params.value(k) for k in sim.paths])
         jac = np.asarray(ca.Function("sensitivity", [p], [ca.jacobian(y, p)])(x), float)
         lo, hi = (np.array([params.scope.uncertainty[k][j] for k in sim.paths]) - x for j in (0, 1))
-        lower += np.minimum(jac * lo, jac * hi).sum(axis=1)
-        upper += np.maximum(jac * lo, jac * hi).sum(axis=1)
+        down, up = np.minimum(jac * lo, jac * hi), np.maximum(jac * lo, jac * hi)  # each value's one-sided shifts
+        lower -= np.sqrt(np.sum(np.minimum(down, 0.0) ** 2, axis=1))  # in quadrature (module docstring)
+        upper += np.sqrt(np.sum(np.maximum(up, 0.0) ** 2, axis=1))
     for other in others:
         lower, upper = np.minimum(lower, other), np.maximum(upper, other)
     return float(np.max(upper - lower))

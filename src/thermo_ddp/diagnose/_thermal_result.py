@@ -74,7 +74,7 @@ class ThermalDiagnosis(ThermalOutcome):
     not_determinable: tuple[dict, ...] = ()
     cv_blocks: int = 3
     hosted: frozenset = frozenset()  # in the final structure, not evidenced by the data (not named)
-    baseline_terms: frozenset = frozenset()  # in every fitted set, never tested (the room's stand-in, see ROOM_NOTE)
+    baseline_terms: frozenset = frozenset()  # in every fitted set, never tested (the room's stand-in, see room_note)
     held_out: Mapping[str, HeldOutCheck] = dataclasses.field(default_factory=dict)  # leave one segment out, per term
     segment_cv: tuple[float, float, tuple[str, ...]] | None = None  # leave one segment out: baseline, final, segments
     envelope: Mapping[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # what the recordings cover

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
+import numpy as np
+
 from ..identify.thermal import FRICTION_KEYS, IRON_KEY, SENSOR_DRIVE_KEYS, THERMAL_TERMS, JointParameters
 from ..model.parameters import THERMAL_KEYS
 from .selection import TermSpec
@@ -29,26 +31,66 @@ ALWAYS_MOVING = 0.9
 SPEED_TERMS = ("friction_heating", "iron_losses")
 # Ranges of capacities and resistances also hold the parameter file's own value within this factor.
 FILE_VALUE_FACTOR = 10.0
-# The experiment that separates each term from what it can be confused with.
-EXPERIMENTS = {
-    "friction_heating": "move at two speeds (e.g. 0.5 and 2 rad/s, 20 min each) with a light load, and hold the "
-                        "same current still for 20 min next to it",
-    "iron_losses": "spin unloaded at 2 rad/s for 10 min with the current near zero (gearbox disengaged if possible), "
-                   "then at 1 rad/s: iron losses scale with the motor speed squared, gearbox friction does not",
-    "drive_heating": "leave the robot powered and idle (current near zero) for 1 h, then switch the drive off and "
-                     "record the cooling for 1 h",
-    "casing_node": "current steps (e.g. 8 A for 30 s, 150 s apart) with the motor voltage logged: the winding "
-                   "resistance shows the fast winding node the casing sensor smooths out",
-    "copper_resistance": "hold two currents (e.g. 3 A and 6 A) until steady with the motor voltage logged",
-}
-# Without a room thermometer a steady heat on the sensor node and a room warmer than the file's ambient_c are
-# one and the same (exactly so for one node): the drive heat is then fitted in every model as the room's
-# stand-in, never tested, never named.
-ROOM_NOTE = {"term": "drive_heating",
-             "reason": "no recording logs the room (ambient_c): a steady heat on the sensor node reads the same as a "
-                       "room warmer than the parameter file's ambient_c; fitted in every model as the room's stand-in, "
-                       "not named",
-             "experiment": "log the room temperature (ambient_c) beside the joint; " + EXPERIMENTS["drive_heating"]}
+# The experiment that separates each term from what it can be confused with, worded from the motor's own
+# recorded range (:func:`experiments`): speeds and currents as shares of the 95th percentiles it reached.
+
+
+def recorded_range(grids: Sequence, params: JointParameters) -> tuple[float, float]:
+    """(speed rad/s, current A): the 95th percentiles of the recorded moving speed and of the current; without
+    recorded motion (or current) a quarter of the file's no-load speed V_bus / (K_b N) (its rated current)."""
+    speeds = np.abs(np.concatenate([g.velocity for g in grids if g.has_velocity] or [np.zeros(0)]))
+    moving = speeds[speeds > MOVING_RAD_S]
+    m = params.motor
+    speed = (float(np.percentile(moving, 95)) if moving.size else
+             0.25 * m.bus_voltage_v / (m.back_emf_v_s_per_rad * m.gear_ratio))
+    currents = np.abs(np.concatenate([g.current_a for g in grids] or [np.zeros(0)]))
+    current = float(np.percentile(currents, 95)) if currents.size and np.any(currents > 0) else m.current_nominal_a
+    return speed, current
+
+
+def experiments(grids: Sequence, params: JointParameters) -> dict[str, str]:
+    """The experiment that separates each candidate term, at this motor's own speeds and currents
+    (:func:`recorded_range`); a gearbox is mentioned only for a geared joint (gear ratio above 1)."""
+    w, i = recorded_range(grids, params)
+    geared = params.motor.gear_ratio > 1
+    return {
+        "friction_heating": f"move at two speeds (e.g. {0.25 * w:.3g} and {w:.3g} rad/s, 20 min each) with a light "
+                            f"load, and hold the same current still for 20 min next to it",
+        "iron_losses": f"turn with the current near zero at {w:.3g} rad/s for 10 min"
+                       + (" (gearbox disengaged if possible)" if geared else "") + f", then at {0.5 * w:.3g} rad/s: "
+                       "iron losses grow with the speed to a power 1-2.5"
+                       + (", gearbox friction about linearly" if geared else ", bearing friction about linearly"),
+        "drive_heating": "leave the motor powered and idle (current near zero) for 1 h, then switch the drive off "
+                         "and record the cooling for 1 h",
+        "casing_node": f"current steps (e.g. {0.8 * i:.3g} A for 30 s, 150 s apart) with the motor voltage logged: "
+                       "the winding resistance shows the fast winding node the casing sensor smooths out",
+        "copper_resistance": f"hold two currents (e.g. {0.4 * i:.3g} A and {0.8 * i:.3g} A) until steady with the "
+                             "motor voltage logged",
+    }
+
+
+def beyond_envelope(envelope) -> tuple[str, str]:
+    """(the recordings that would pin down what these could not, two speeds to try) worded from the operating
+    range the recordings covered (``envelope``: :func:`~thermo_ddp.envelope.envelope_of`); without it, in general."""
+    ranged = {"speed_rad_s", "current_a", "ambient_c"} <= set(envelope)
+    beyond = "recordings at other speeds, currents and ambient (coolant) temperatures than these" + (
+        f" (speed up to {envelope['speed_rad_s'][1]:.3g} rad/s, current up to {envelope['current_a'][1]:.3g} A, "
+        f"ambient_c {envelope['ambient_c'][0]:.3g}-{envelope['ambient_c'][1]:.3g} °C)" if ranged else "")
+    top = envelope["speed_rad_s"][1] if "speed_rad_s" in envelope else 0.0
+    return beyond, (f" (e.g. {0.4 * top:.3g} and {top:.3g} rad/s)" if top > 0 else "")
+
+
+def room_note(texts: dict[str, str]) -> dict:
+    """Without a room thermometer a steady heat on the sensor node and a room warmer than the file's
+    ambient_c are one and the same (exactly so for one node): the drive heat is then fitted in every model
+    as the room's stand-in, never tested, never named."""
+    return {"term": "drive_heating",
+            "reason": "no recording logs the room (ambient_c): a steady heat on the sensor node reads the same as a "
+                      "room warmer than the parameter file's ambient_c; fitted in every model as the room's stand-in, "
+                      "not named",
+            "experiment": "log the room temperature (ambient_c) beside the motor; " + texts["drive_heating"]}
+
+
 # How a term is judged leaving one segment out (diagnosis JSON and report).
 HELD_OUT_RULE = ("each segment (recording or stretch between gaps) predicted from its first measurement by a fit of "
                  "the other segments; a chosen term is judged on the segments that can judge it: the others hold more "

@@ -21,6 +21,7 @@ from ..model.catalogue import SOURCE_KINDS
 from ..identify.thermal_data import ThermalGrid, mean_room_c
 from ..model.parameters import JointParameters, ThermalParameters
 from ._thermal_localise import noise_model
+from ._thermal_terms import beyond_envelope
 from ._thermal_result import ThermalOutcome
 from .growth import GROWTH_TERMS, HEAT_KINDS, Addition, GrowthSettings, Grower, Step, subset_fit
 from .localise import ResidualSeries
@@ -84,14 +85,16 @@ class NetworkDiagnosis(ThermalOutcome):
 
     def not_determinable(self) -> list[dict]:
         out = []
+        beyond, speeds = beyond_envelope(self.envelope)
         for p, (lo, hi) in self.final.undetermined().items():
             if not p.endswith("_w_s_per_rad"):
                 out.append({"term": p, "reason": f"95 % interval {lo:.3g} to {hi:.3g}: not pinned down by these data",
-                            "experiment": "recordings at other speeds, currents and coolant temperatures"})
+                            "experiment": beyond})
         for alt in self.alternatives:
             out.append({"term": "+".join(alt["terms"]), "reason": f"fits as well as the chosen source (winding RMSE "
                         f"{alt['rmse']:.3g} K): written as an alternative", "experiment": "the same currents at two or "
-                        "more speeds until the temperatures settle: a speed-dependent loss changes, a constant does not"})
+                        f"more speeds{speeds} until the temperatures settle: a speed-dependent loss changes, a constant "
+                        "does not"})
         return out
 
     def network_section(self) -> dict:

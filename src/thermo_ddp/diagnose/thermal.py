@@ -63,7 +63,7 @@ from ..recordings import as_recordings, read_recordings
 from ._thermal_fitter import _Fitter, _noise, _series
 from ._thermal_localise import ThermalLocaliseSettings, ThermalRegimeSettings, locate_thermal, thermal_regimes
 from ._thermal_result import ThermalDiagnosis
-from ._thermal_terms import (ALWAYS_MOVING, CANDIDATE_TERMS, EXPERIMENTS, MOVING_RAD_S, ONE_SPEED_SPREAD, ROOM_NOTE,
+from ._thermal_terms import (ALWAYS_MOVING, CANDIDATE_TERMS, MOVING_RAD_S, ONE_SPEED_SPREAD, experiments, room_note,
                              SPEED_TERMS, iron_max, term_keys, term_specs)
 from .growth import GrowthSettings
 from .network_diagnosis import NetworkDiagnosis, diagnose_network
@@ -105,10 +105,10 @@ class ThermalDiagnosisSettings:
         require(self.min_span_s >= 0, name, "min_span_s", self.min_span_s, "must be >= 0")
 
 
-def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid],
-                       allowed: Sequence[str]) -> tuple[list[str], list[dict]]:
+def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid], allowed: Sequence[str],
+                       texts: Mapping[str, str]) -> tuple[list[str], list[dict]]:
     """The candidates these data can test; a heat source the motor cannot have ([hardware] heat_sources,
-    ``allowed``) is never named."""
+    ``allowed``) is never named (``texts``: each term's experiment)."""
     usable, skipped = [], []
     moving = any(g.has_velocity and np.any(np.abs(g.velocity) > MOVING_RAD_S) for g in grids)
     for term in candidates:
@@ -117,7 +117,7 @@ def _usable_candidates(candidates: Sequence[str], grids: Sequence[ThermalGrid],
             continue
         if term in SPEED_TERMS and not moving:
             skipped.append({"term": term, "reason": "no recording has a velocity (or position) showing motion",
-                            "experiment": EXPERIMENTS[term]})
+                            "experiment": texts[term]})
         else:
             usable.append(term)
     return usable, skipped
@@ -132,7 +132,8 @@ def _too_short(grids: Sequence[ThermalGrid], settings: ThermalDiagnosisSettings)
     return ""
 
 
-def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFit]) -> list[dict]:
+def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFit],
+                  texts: Mapping[str, str]) -> list[dict]:
     """What these data cannot tell apart: equally good term sets, and named terms whose parameters
     are not identifiable."""
     out, chosen = [], selection.chosen
@@ -140,7 +141,7 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
         for term in sorted(other.terms ^ chosen.terms):
             out.append({"term": term, "reason": f"{fits[other.terms].model} fits as well as {fits[chosen.terms].model} "
                                                 f"(RMSE {other.rmse:.3g} vs {chosen.rmse:.3g} K)",
-                        "experiment": EXPERIMENTS[term]})
+                        "experiment": texts[term]})
     final = fits[chosen.terms]
     for term in sorted(chosen.terms):
         loose = [k for k in term_keys(term, canonical_terms("one_node", chosen.terms))
@@ -149,11 +150,11 @@ def _undetermined(selection: SubsetSelection, fits: Mapping[frozenset, ThermalFi
             partners = sorted({c for k in loose for c in final.collinear(k)})
             out.append({"term": term, "reason": f"needed, but {', '.join(loose)} not identifiable from these data"
                                                 + (f" (collinear with {', '.join(partners)})" if partners else ""),
-                        "experiment": EXPERIMENTS[term]})
+                        "experiment": texts[term]})
     return out
 
 
-def _held_out_notes(checks: Mapping[str, HeldOutCheck], named: frozenset) -> list[dict]:
+def _held_out_notes(checks: Mapping[str, HeldOutCheck], named: frozenset, texts: Mapping[str, str]) -> list[dict]:
     """Terms a held-out segment predicts worse with than without: withdrawn, not claimed.  Named terms the
     held-out segments could not judge (undecided, or a tie within the noise): claimed on the in-sample test
     alone, and said so."""
@@ -167,7 +168,7 @@ def _held_out_notes(checks: Mapping[str, HeldOutCheck], named: frozenset) -> lis
                       "nothing held out speaks against it either")
         else:
             continue
-        out.append({"term": t, "reason": reason, "experiment": EXPERIMENTS[t]})
+        out.append({"term": t, "reason": reason, "experiment": texts[t]})
     return out
 
 
@@ -195,7 +196,7 @@ def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
     return [{"term": t, "reason": reason.format(t), "experiment": experiment} for t in named]
 
 
-def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, list[dict]]:
+def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid], texts: Mapping[str, str]) -> tuple[frozenset, list[dict]]:
     """A casing node whose winding time constant C_w R_wc is shorter than the grid's step is not
     evidenced: the data cannot resolve it.  It stays in the structure when the drive node needs it (the
     contract's drive node sits on the casing) but is not named."""
@@ -207,7 +208,7 @@ def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, l
     if tau_s >= step_s:
         return frozenset(), []
     return frozenset({"casing_node"}), [{
-        "term": "casing_node", "experiment": EXPERIMENTS["casing_node"],
+        "term": "casing_node", "experiment": texts["casing_node"],
         "reason": f"fitted winding time constant C_w R_wc = {tau_s:.1f} s, below the {step_s:.0f} s step of the "
                   "data: no casing node is evidenced (kept in the structure only to host the drive node)"}]
 
@@ -288,12 +289,13 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     if several_sensors(params, grids):
         return diagnose_network(params, grids, settings=settings.growth, window_s=settings.localise.noise_window_s,
                                 rows=rows, progress=settings.progress, envelope=envelope_of(recs))
-    usable, skipped = _usable_candidates(candidates, grids, params.scope.allowed_sources)
+    texts = experiments(grids, params)
+    usable, skipped = _usable_candidates(candidates, grids, params.scope.allowed_sources, texts)
     base = frozenset()
     if "drive_heating" in usable and not any(g.has_ambient for g in grids):
         usable.remove("drive_heating")
         base = frozenset({"drive_heating"})
-        skipped.append(ROOM_NOTE)
+        skipped.append(room_note(texts))
     regimes = tuple(thermal_regimes(g, settings.regimes) for g in grids)
     fitter, selection, held_out, cv, segment_cv = _select(params, grids, settings, usable, base)
     fits = dict(fitter.fits)
@@ -304,10 +306,11 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     final = fits[selection.chosen.terms]
     locs = tuple(locate_thermal(_series(f, grids, regimes), settings.localise) for f in (fits[base], final))
     noise = _noise(final, grids, settings.localise.noise_window_s)
-    hosted, unresolved = _hosted(final, grids)
-    fitting, message = _verdict(final, noise, settings, selection.chosen.terms - base - hosted, cv)
-    notes = (tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
-             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)))
+    hosted, unresolved = _hosted(final, grids, texts)
+    named = selection.chosen.terms - base - hosted
+    fitting, message = _verdict(final, noise, settings, named, cv)
+    notes = (tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, named, texts))
+             + tuple(_undetermined(selection, fits, texts)) + tuple(_one_speed(grids, selection.chosen.terms - base)))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise, notes, settings.cv_blocks, hosted, base,
                             held_out, segment_cv, envelope_of(recs))
@@ -326,6 +329,6 @@ def diagnose_thermal_files(paths: Sequence[str | Path], plot: str | Path | None 
     return diagnosis.to_dict() | {"rows": recordings.rows}
 
 
-__all__ = ["CANDIDATE_TERMS", "EXPERIMENTS", "ThermalDiagnosis", "ThermalDiagnosisSettings", "diagnose_thermal",
+__all__ = ["CANDIDATE_TERMS", "ThermalDiagnosis", "ThermalDiagnosisSettings", "diagnose_thermal",
            "diagnose_thermal_files", "iron_max", "term_keys", "term_specs"]
 
