@@ -25,10 +25,11 @@ from .verdicts import verdict
 log = logging.getLogger(__name__)
 RESTART_REG = 1e-4   # first-pass Quu regularisation of the restart (the default starts at 0)
 # A DDP solve from a neighbour's multipliers that reaches no verdict in this many iterations is dropped for the
-# same solve from the trajectories alone. Measured on the 40 kg longest-hold searches' boundary confirmations
-# (benchmarks/README.md): 20 (84 °C) and 33 (140 °C) iterations from the multipliers against 46 and 57 from the
-# trajectories; from other neighbours' multipliers (an infeasible one, a longer hold) 200 iterations, no verdict.
-WARM_MULTIPLIER_ITERATIONS = 40
+# same solve from the trajectories alone. Measured on the longest-hold searches' probes one knot past a feasible
+# one (benchmarks/README.md; 40 kg at 84 and 140 °C, 30 kg at 100 °C, 55 kg at 120 °C): 20, 33, 33, 47 and 45
+# iterations from the multipliers against 46, 57, 72, 39 and 50 from the trajectories; from an infeasible or a
+# longer neighbour's multipliers 200 iterations without a verdict, so those are never given.
+WARM_MULTIPLIER_ITERATIONS = 50
 
 
 @dataclasses.dataclass(frozen=True)
