@@ -9,8 +9,10 @@ prediction from an infeasible plan near the boundary is within a knot or two (it
 does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
 on the same side twice the probes gallop (steps doubling); bisection takes over after
 :data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
-hold's plan stretched (solved again when it came from another start). The default 40 kg searches take 4 solves
-at 84 °C (one confirms the boundary) and 3 at 140 °C (6 and 4 by galloping and bisection; benchmarks/README.md).
+hold's plan stretched and its multipliers (:func:`boundary_warm_start`; solved again when it came from another
+start). The default 40 kg searches take 4 solves and 128 DDP iterations at 84 °C (the confirmation of the
+boundary 20 of them) and 3 solves and 141 iterations at 140 °C (156 and 186 with the confirmation from the
+trajectories alone; 6 and 4 solves by galloping and bisection; benchmarks/README.md).
 """
 from __future__ import annotations
 
