@@ -163,13 +163,16 @@ def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     return lo
 
 
-def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> tuple[int | None, WarmStart | None]:
+def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int,
+                verdicts: bool = True) -> tuple[int | None, WarmStart | None]:
     """(the probe it comes from, the warm start): the nearest solved probe's solution stretched to ``knots``
     (with its multipliers from a feasible one one knot below: :func:`boundary_warm_start`); the nearest
     feasible one first, unless an infeasible one is nearer by more than a knot. Measured on the 40 kg 140 °C
     search (benchmarks/README.md): the feasible probe 3 knots below the infeasible first one took 59
     iterations from its plan stretched against 82 from the plan as it is (at 46.1 kg, 127.6 °C, where the
-    unstretched plan was chosen for, the search now takes 3 solves, none retried)."""
+    unstretched plan was chosen for, the search now takes 3 solves, none retried). Without ``verdicts`` (a
+    controller's real-time search) an infeasible probe's plan is taken as it is and no multipliers are given:
+    the receding-horizon tests are measured with those starts."""
     if not probes:
         return None, None
     feasible = [k for k, (_, o) in probes.items() if o.feasible]
@@ -177,8 +180,10 @@ def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> tup
     if feasible and abs(min(feasible, key=lambda k: abs(k - knots)) - knots) <= abs(near - knots) + 1:
         near = min(feasible, key=lambda k: abs(k - knots))
     problem, outcome = probes[near]
-    warm = boundary_warm_start if outcome.feasible and near == knots - 1 else stretched_warm_start
-    return near, warm((problem, outcome.result), knots)
+    if not verdicts and not outcome.feasible:
+        return near, WarmStart(outcome.result.xs, outcome.result.us)
+    boundary = verdicts and outcome.feasible and near == knots - 1
+    return near, (boundary_warm_start if boundary else stretched_warm_start)((problem, outcome.result), knots)
 
 
 def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int]:
@@ -199,8 +204,8 @@ def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int
 class _Search:
     """The probes of one search: hold (knots) -> (problem, outcome), and the probe each was warm-started from."""
 
-    def __init__(self, lp, solve: Callable[[object, WarmStart | None], Outcome]):
-        self.lp, self.solve = lp, solve
+    def __init__(self, lp, solve: Callable[[object, WarmStart | None], Outcome], verdicts: bool = True):
+        self.lp, self.solve, self.verdicts = lp, solve, verdicts
         self.probes: dict[int, tuple[object, Outcome]] = {}
         self.source: dict[int, int | None] = {}
         self.replaced: list[Outcome] = []
@@ -209,7 +214,7 @@ class _Search:
         """Solve the probe holding ``knots``, from probe ``source``'s plan stretched (default: the nearest)."""
         probe = self.lp.with_hold(knots * self.lp.settings.dt_s)
         if source is None:
-            source, warm = _warm_start(self.probes, knots)
+            source, warm = _warm_start(self.probes, knots, self.verdicts)
         else:  # the confirmation: from the boundary's plan and multipliers
             warm = boundary_warm_start((self.probes[source][0], self.probes[source][1].result), knots)
         if knots in self.probes:
@@ -255,7 +260,7 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
     ``stop_without_verdict`` off (a controller that needs some verified plan) counts as not feasible: the
     search goes on to shorter holds, and the result is then the longest hold verified feasible, not a verdict
     on longer ones (so nothing is confirmed: a real-time review spends no solve on it)."""
-    search, top = _Search(lp, solve), lp.hold_knots[1] - lp.hold_knots[0]
+    search, top = _Search(lp, solve, stop_without_verdict), lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
     while hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi)):
         confirm = hi - lo <= 1
