@@ -7,7 +7,7 @@ import types
 import numpy as np
 import pytest
 
-from thermo_ddp.tasks.hold_search import _gallop, stretched_warm_start
+from thermo_ddp.tasks.hold_search import _gallop, boundary_warm_start, stretched_warm_start
 from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem, initial_guess
 
 
@@ -45,6 +45,24 @@ def test_a_stretched_solution_lowers_where_the_probe_lowers(lift, shift):
     assert not warm.multipliers
 
 
+@pytest.mark.parametrize("shift", [-3, 1])
+def test_the_boundary_warm_start_moves_the_multipliers_with_the_holds_end(lift, shift):
+    """Multipliers marked with the source's reference angle per knot, moved to another hold, carry the target's
+    reference angle (the rows of the lowering move with the hold's end); each row's penalty is the geometric
+    mean of its own and the smallest; the trajectories are :func:`stretched_warm_start`'s."""
+    knots, ng = 30, lift.problem.n_constraints
+    src, dst = (lift.with_hold(k * lift.settings.dt_s) for k in (knots, knots + shift))
+    q_ref = lift.problem.parameters.slice("q_ref_rad")
+    guess, rho = initial_guess(src), np.geomspace(1e2, 1e6, ng + lift.problem.n_terminal_constraints)
+    result = types.SimpleNamespace(xs=guess.xs, us=guess.us, multipliers={
+        "constraints": np.repeat(src.params[:-1, q_ref], ng, axis=1), "terminal_constraints": np.ones(2),
+        "penalty": rho})
+    warm = boundary_warm_start((src, result), knots + shift)
+    np.testing.assert_allclose(warm.multipliers["constraints"], np.repeat(dst.params[:-1, q_ref], ng, axis=1))
+    np.testing.assert_allclose(warm.multipliers["penalty"], np.sqrt(rho * 1e2))
+    np.testing.assert_array_equal(warm.xs, stretched_warm_start((src, result), knots + shift).xs)
+
+
 def test_the_boundary_verdict_is_confirmed_from_the_longest_holds_plan(lift, monkeypatch):
     """A false infeasible verdict one knot past the longest hold (reached from a cold start, as on four random
     requests, benchmarks/README.md) is solved again from the feasible neighbour's plan stretched, and the search
@@ -59,7 +77,7 @@ def test_the_boundary_verdict_is_confirmed_from_the_longest_holds_plan(lift, mon
         source = None if warm is None else warm.xs[0, 0]
         feasible = k <= 40 or (k <= 42 and source == k - 1)
         plan = types.SimpleNamespace(xs=np.full_like(lift.x0, k, shape=(lift.params.shape[0], lift.x0.size)),
-                                     us=np.full((lift.params.shape[0] - 1, 1), float(k)))
+                                     us=np.full((lift.params.shape[0] - 1, 1), float(k)), multipliers={})
         return Outcome(plan, "feasible" if feasible else "infeasible", ())
 
     monkeypatch.setattr(hold_search, "_next_guess",

@@ -192,12 +192,14 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
 
 def test_default_searches_take_few_solves_and_few_forward_passes(default_plan):
     """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer, the latter
-    solved from the former's plan stretched (at 84 °C the first infeasible verdict there came from an infeasible
-    probe's plan and is solved again: 4 solves; 140 °C: 3), with at most 1.5 forward passes (line-search trials)
-    per DDP iteration over the whole search."""
+    solved from the former's plan and multipliers (at 84 °C the first infeasible verdict there came from an
+    infeasible probe's plan and is solved again: 4 solves; 140 °C: 3), in fewer than 150 DDP iterations (156 and
+    186 before the confirmation from the multipliers), with at most 1.6 forward passes (line-search trials) per
+    iteration over the whole search (measured 1.45 and 1.57: the iterations the multipliers saved took about one
+    pass each; 185 and 222 passes in all, 217 and 277 before; benchmarks/README.md)."""
     work = default_plan.solver["work"]
     assert default_plan.solver["solves"] <= 4 and default_plan.solver["attempts"] == ["ddp"]
-    assert work["forward_passes"] <= 1.5 * work["iterations"]
+    assert work["iterations"] < 150 and work["forward_passes"] <= 1.6 * work["iterations"]
 
 
 @pytest.mark.slow

@@ -49,6 +49,23 @@ def test_the_ladder_stops_at_the_first_verdict_and_reports_every_attempt():
     assert "short: failed (max_iterations)" in outcome.tried()
 
 
+def test_a_warm_start_from_multipliers_without_a_verdict_falls_back_to_its_trajectories(monkeypatch):
+    """The ladder's first rung from a guess carrying multipliers stops at the cap (here 1 iteration) without a
+    verdict; the next solves the same trajectories without them: the same result as a solve from those alone."""
+    lp = lift.build_lift_problem(LiftSettings(payload_kg=20.0, limit_c=84.0, hold_s=2.0))
+    solver, guess = lift.make_solver(lp), initial_guess(lp)
+    monkeypatch.setattr(attempts, "WARM_MULTIPLIER_ITERATIONS", 1)
+    warm = attempts.WarmStart(guess.xs, guess.us, {"constraints": np.ones((lp.problem.horizon, lp.problem.n_constraints)),
+                                                  "penalty": 1e4})
+    outcome = attempts.SolverLadder(lp.problem, solver).solve(lp, warm)
+    assert [name for name, _ in outcome.attempts] == ["ddp from the multipliers", "ddp"]
+    first = outcome.attempts[0][1]
+    assert first.reason == "stopped" and first.iterations == 1 and verdict(first) is None
+    plain = solver.solve(lp.x0, lp.params, attempts.WarmStart(guess.xs, guess.us))
+    assert outcome.verdict == verdict(plain) == "feasible"
+    np.testing.assert_allclose(outcome.result.us, plain.us, atol=1e-12)
+
+
 def test_careful_short_lift_is_a_motion_verdict_with_the_lift_time_to_change():
     """The issue's case: 1.3 s to -1.66 rad with careful motion is infeasible because of stop_approach (not the
     heat); the remedy's lift time is the boundary: one step shorter is infeasible, that one feasible."""

@@ -1,7 +1,9 @@
 """Solving a task until a solve reaches a verdict: a failed solve is retried, never read as a statement
 about the robot.
 
-The ladder (issue 23): the task's solver from its guess; for DDP then a regularised restart (Gauss-Newton
+The ladder (issue 23): the task's solver from its guess (a guess carrying a neighbour's multipliers first
+from them, for at most :data:`WARM_MULTIPLIER_ITERATIONS` iterations, then from its trajectories alone); for
+DDP then a regularised restart (Gauss-Newton
 iLQR, whose Hessians are positive semi-definite by construction, with a regularised first pass), the same
 from another initial guess (the arm at rest, holding its start), and last the reference solver (IPOPT on
 the same transcription). When none reaches a verdict the task's plan is ``failed``.
@@ -22,6 +24,12 @@ from .verdicts import verdict
 
 log = logging.getLogger(__name__)
 RESTART_REG = 1e-4   # first-pass Quu regularisation of the restart (the default starts at 0)
+# A DDP solve from a neighbour's multipliers that reaches no verdict in this many iterations is dropped for the
+# same solve from the trajectories alone. Measured on the longest-hold searches' probes one knot past a feasible
+# one (benchmarks/README.md; 40 kg at 84 and 140 °C, 30 kg at 100 °C, 55 kg at 120 °C): 20, 33, 33, 47 and 45
+# iterations from the multipliers against 46, 57, 72, 39 and 50 from the trajectories; from an infeasible or a
+# longer neighbour's multipliers 200 iterations without a verdict, so those are never given.
+WARM_MULTIPLIER_ITERATIONS = 50
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,9 +103,17 @@ class SolverLadder:
             name = first.plugin if isinstance(first, (IpoptSolver, FatropSolver)) else type(first).__name__
             return solve_until_verdict(((name, lambda: first.solve(x0, p, guess)),
                                         (f"{name} from rest", lambda: first.solve(x0, p, rest_guess(tp)))))
-        rungs = [("ddp", lambda: first.solve(x0, p, guess)),
-                 ("ddp regularised restart", lambda: self.restart.solve(x0, p, WarmStart(guess.xs, guess.us))),
-                 ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp)))]
+        plain = WarmStart(guess.xs, guess.us)
+        rungs = [("ddp", lambda: first.solve(x0, p, plain))]
+        if guess.multipliers:
+            rungs.insert(0, ("ddp from the multipliers", lambda: first.solve(x0, p, guess, callback=_capped)))
+        rungs += [("ddp regularised restart", lambda: self.restart.solve(x0, p, plain)),
+                  ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp)))]
         if reference:
             rungs.append(("ipopt", lambda: self.reference.solve(x0, p, WarmStart(guess.xs, guess.us))))
         return solve_until_verdict(rungs)
+
+
+def _capped(view) -> bool:
+    """The callback that stops a solve after :data:`WARM_MULTIPLIER_ITERATIONS` iterations."""
+    return view.iteration >= WARM_MULTIPLIER_ITERATIONS

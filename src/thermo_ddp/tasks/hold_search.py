@@ -9,8 +9,10 @@ prediction from an infeasible plan near the boundary is within a knot or two (it
 does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
 on the same side twice the probes gallop (steps doubling); bisection takes over after
 :data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
-hold's plan stretched (solved again when it came from another start). The default 40 kg searches take 4 solves
-at 84 °C (one confirms the boundary) and 3 at 140 °C (6 and 4 by galloping and bisection; benchmarks/README.md).
+hold's plan stretched and its multipliers (:func:`boundary_warm_start`; solved again when it came from another
+start). The default 40 kg searches take 4 solves and 128 DDP iterations at 84 °C (the confirmation of the
+boundary 20 of them) and 3 solves and 141 iterations at 140 °C (156 and 186 with the confirmation from the
+trajectories alone; 6 and 4 solves by galloping and bisection; benchmarks/README.md).
 """
 from __future__ import annotations
 
@@ -76,12 +78,28 @@ def _moved(values: np.ndarray, end: int, shift: int) -> np.ndarray:
 def stretched_warm_start(plan: tuple[object, SolverResult], knots: int) -> WarmStart:
     """``plan``'s trajectories with its hold made ``knots`` long: everything after the hold moves with the hold's
     end, so the lowering starts where the probe's reference lowers (not the neighbour's solution as it is, whose
-    lowering is off by the knots between them). Its multipliers are left: measured on the 40 kg 140 °C probes,
-    a feasible neighbour's multipliers and penalties kept the infeasible probe one knot longer from its
-    certificate for 200 iterations (trajectories only: 42 iterations, 77 from the unstretched solution)."""
+    lowering is off by the knots between them). Its multipliers are left (see :func:`boundary_warm_start`)."""
     src, result = plan
     end, shift = src.hold_knots[1], knots - (src.hold_knots[1] - src.hold_knots[0])
     return WarmStart(_moved(result.xs, end, shift), _moved(result.us, end, shift))
+
+
+def boundary_warm_start(plan: tuple[object, SolverResult], knots: int) -> WarmStart:
+    """:func:`stretched_warm_start` with ``plan``'s constraint multipliers moved with the hold's end and each
+    row's penalty halfway (geometric) back to the smallest: the confirmation one knot past the longest feasible
+    hold, from that hold's plan. Measured on the 40 kg searches (benchmarks/README.md): the infeasible verdict
+    in 20 iterations at 84 °C and 33 at 140 °C against 46 and 57 from the trajectories alone; with the
+    penalties kept, or from an infeasible neighbour, 200 iterations and no verdict (the solve is then capped:
+    :data:`thermo_ddp.tasks.attempts.WARM_MULTIPLIER_ITERATIONS`)."""
+    src, result = plan
+    end, shift = src.hold_knots[1], knots - (src.hold_knots[1] - src.hold_knots[0])
+    m, warm = result.multipliers, stretched_warm_start(plan, knots)
+    if m.get("constraints") is None or m.get("penalty") is None:  # a solver without an augmented Lagrangian
+        return warm
+    rho = np.asarray(m["penalty"], dtype=float)
+    return WarmStart(warm.xs, warm.us, {"constraints": _moved(m["constraints"], end, shift),
+                                        "terminal_constraints": m.get("terminal_constraints"),
+                                        "penalty": np.sqrt(rho * rho.min())})
 
 
 def _peak_winding(lp, current: np.ndarray, speed: np.ndarray) -> float:
@@ -145,11 +163,16 @@ def predicted_hold_knots(lp, plan: tuple[object, SolverResult]) -> int:
     return lo
 
 
-def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> tuple[int | None, WarmStart | None]:
-    """(the probe it comes from, the warm start): the nearest solved probe's solution, a feasible one's
-    stretched to ``knots``; the nearest feasible one first, unless an infeasible one is nearer by more than a
-    knot. Measured (46.1 kg, 127.6 °C): an infeasible probe's solution stretched failed DDP's first passes
-    (regularisation) twice, the ladder ended in IPOPT."""
+def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int,
+                verdicts: bool = True) -> tuple[int | None, WarmStart | None]:
+    """(the probe it comes from, the warm start): the nearest solved probe's solution stretched to ``knots``
+    (with its multipliers from a feasible one one knot below: :func:`boundary_warm_start`); the nearest
+    feasible one first, unless an infeasible one is nearer by more than a knot. Measured on the 40 kg 140 °C
+    search (benchmarks/README.md): the feasible probe 3 knots below the infeasible first one took 59
+    iterations from its plan stretched against 82 from the plan as it is (at 46.1 kg, 127.6 °C, where the
+    unstretched plan was chosen for, the search now takes 3 solves, none retried). Without ``verdicts`` (a
+    controller's real-time search) an infeasible probe's plan is taken as it is and no multipliers are given:
+    the receding-horizon tests are measured with those starts."""
     if not probes:
         return None, None
     feasible = [k for k, (_, o) in probes.items() if o.feasible]
@@ -157,9 +180,10 @@ def _warm_start(probes: Mapping[int, tuple[object, Outcome]], knots: int) -> tup
     if feasible and abs(min(feasible, key=lambda k: abs(k - knots)) - knots) <= abs(near - knots) + 1:
         near = min(feasible, key=lambda k: abs(k - knots))
     problem, outcome = probes[near]
-    if not outcome.feasible:  # its violated trajectory stretched has gaps full DDP's first passes cannot take
+    if not verdicts and not outcome.feasible:
         return near, WarmStart(outcome.result.xs, outcome.result.us)
-    return near, stretched_warm_start((problem, outcome.result), knots)
+    boundary = verdicts and outcome.feasible and near == knots - 1
+    return near, (boundary_warm_start if boundary else stretched_warm_start)((problem, outcome.result), knots)
 
 
 def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int]:
@@ -180,8 +204,8 @@ def _gallop(fits: Callable[[int], bool], start: int, top: int) -> tuple[int, int
 class _Search:
     """The probes of one search: hold (knots) -> (problem, outcome), and the probe each was warm-started from."""
 
-    def __init__(self, lp, solve: Callable[[object, WarmStart | None], Outcome]):
-        self.lp, self.solve = lp, solve
+    def __init__(self, lp, solve: Callable[[object, WarmStart | None], Outcome], verdicts: bool = True):
+        self.lp, self.solve, self.verdicts = lp, solve, verdicts
         self.probes: dict[int, tuple[object, Outcome]] = {}
         self.source: dict[int, int | None] = {}
         self.replaced: list[Outcome] = []
@@ -190,9 +214,9 @@ class _Search:
         """Solve the probe holding ``knots``, from probe ``source``'s plan stretched (default: the nearest)."""
         probe = self.lp.with_hold(knots * self.lp.settings.dt_s)
         if source is None:
-            source, warm = _warm_start(self.probes, knots)
-        else:
-            warm = stretched_warm_start((self.probes[source][0], self.probes[source][1].result), knots)
+            source, warm = _warm_start(self.probes, knots, self.verdicts)
+        else:  # the confirmation: from the boundary's plan and multipliers
+            warm = boundary_warm_start((self.probes[source][0], self.probes[source][1].result), knots)
         if knots in self.probes:
             self.replaced.append(self.probes[knots][1])
         self.probes[knots], self.source[knots] = (probe, self.solve(probe, warm)), source
@@ -236,7 +260,7 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
     ``stop_without_verdict`` off (a controller that needs some verified plan) counts as not feasible: the
     search goes on to shorter holds, and the result is then the longest hold verified feasible, not a verdict
     on longer ones (so nothing is confirmed: a real-time review spends no solve on it)."""
-    search, top = _Search(lp, solve), lp.hold_knots[1] - lp.hold_knots[0]
+    search, top = _Search(lp, solve, stop_without_verdict), lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
     while hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi)):
         confirm = hi - lo <= 1
