@@ -195,6 +195,21 @@ def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
     return [{"term": t, "reason": reason.format(t), "experiment": experiment} for t in named]
 
 
+def _one_regime(regimes: Sequence[np.ndarray], usable: Sequence[str]) -> list[dict]:
+    """Motion only ever under load and load only ever in motion (no stretch loaded at rest): a running loss then
+    always comes with the copper heat, in one proportion, and reads as a larger thermal resistance (every heat
+    scales with it); the speed terms are listed, named or not (seed report 4.4: friction heat is the difference
+    between a moving and a static phase at the same current)."""
+    labels = np.concatenate(regimes) if regimes else np.zeros(0, str)
+    if not np.any(labels == "moving") or np.any((labels == "static") | (labels == "heating")):
+        return []
+    reason = ("seen in one regime: the joint only carries current while it moves, so a running loss always comes "
+              "with the copper heat and reads as a larger thermal resistance; its presence and values cannot be told")
+    experiment = ("hold the moving phase's current still (e.g. 20 min) next to the motion, and move at a second "
+                  "speed: the running loss is the difference between moving and static at the same current")
+    return [{"term": t, "reason": reason, "experiment": experiment} for t in SPEED_TERMS if t in usable]
+
+
 def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid]) -> tuple[frozenset, list[dict]]:
     """A casing node whose winding time constant C_w R_wc is shorter than the grid's step is not
     evidenced: the data cannot resolve it.  It stays in the structure when the drive node needs it (the
@@ -307,7 +322,8 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     hosted, unresolved = _hosted(final, grids)
     fitting, message = _verdict(final, noise, settings, selection.chosen.terms - base - hosted, cv)
     notes = (tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, selection.chosen.terms - base - hosted))
-             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base)))
+             + tuple(_undetermined(selection, fits)) + tuple(_one_speed(grids, selection.chosen.terms - base))
+             + tuple(_one_regime(regimes, usable)))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise, notes, settings.cv_blocks, hosted, base,
                             held_out, segment_cv, envelope_of(recs))

@@ -538,9 +538,10 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
 
 
 def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
-    """Keys held at the parameter file's values by default: with only the casing measured, the drive's
-    path to ambient and its current-dependent loss trade off against its idle heat and coupling."""
-    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else ()
+    """Keys held at the file's values: on a casing sensor the drive's ambient path and i^2 loss trade off against its
+    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha): free, every heat scales."""
+    drive = "drive_heating" in terms
+    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else DRIVE_FIXED[1:] if drive else ()
 
 
 def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),
