@@ -10,8 +10,9 @@ term                physics                                                     
 ==================  ==========================================================  =========================================
 friction_heating    heat c1 abs(v) + c2 v^2 (free, >= 0; winding of a one-node  ``friction_heat_linear_w_s_per_rad``,
                     network, casing otherwise), not tied to [motor] friction    ``friction_heat_quadratic_w_s2_per_rad2``
-drive_heating       idle W + W/A^2 i^2 on the sensor node (one node), or a      ``drive_idle_w``, ``drive_loss_w_per_a2``
-                    drive node heating the casing (with the casing node)        (+ ``model = "two_node_drive"``)
+drive_heating       idle W + W/A^2 i^2 on the sensor node (one node; the i^2    ``drive_idle_w``, ``drive_loss_w_per_a2``
+                    loss held: the copper's twin), or a drive node heating the  (+ ``model = "two_node_drive"``)
+                    casing (with the casing node)
 casing_node         winding and casing nodes, sensor on the casing (eq. 6)      ``model = "two_node"``
 copper_resistance   free temperature coefficient of R(T) (eq. 3)                ``[motor] copper_alpha_per_k``
 iron_losses         speed-dependent loss P_ref (abs(v) / 1 rad/s)^2, winding    ``iron_loss_w`` (+ ref speed, exponent)
@@ -36,7 +37,8 @@ thermal rest (a fold predicts from the network's equilibrium).  A term whose hel
 with it than without, beyond the noise of one reading, is withdrawn (``not_determinable`` says why) and
 the selection repeated without it; a tie, or no segment able to judge, is no evidence against it: it
 stands on the in-sample test, as with one recording, and ``not_determinable`` says so.  A chosen
-running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
+running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds; so are
+the speed terms on data that carry current only while moving (seen in one regime: :func:`_one_regime`).
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
 is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the

@@ -7,8 +7,8 @@ differentiates the same expressions the planner integrates.  Structures (``terms
 - ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
 - ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing
   capacities, ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
-- ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (both free, >= 0) on the
-  sensor node of a one-node network (the contract's drive heat without a drive node); with the casing
+- ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (idle free, >= 0; i^2 loss held by
+  default, :func:`default_fixed`) on the sensor node of a one-node network (no drive node); with the casing
   node, a drive node (``two_node_drive``) coupled to the casing and to ambient, heated by the idle loss;
 - ``friction_heating``: free heat ``c1 |v| + c2 v^2`` (``friction_heat_linear_w_s_per_rad``,
   ``friction_heat_quadratic_w_s2_per_rad2``, joint-side v, both >= 0), in the winding of a one-node
