@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import sys
 import time
 
 import numpy as np
@@ -36,6 +37,7 @@ from _common import machine, write
 CASE_SEED, FAMILY_SEED = 90_000, 95_000
 METHODS = ("designed", "protocol", "steps")
 UNSEEN_SPEED_RAD_S = 1.5   # the protocol's speed when the passive session never moved
+LIMIT_C = 84.0             # the elbow file's cut-off: the designs' default limit
 
 
 def protocol_inputs(duration_s: float, speed: float):
@@ -50,13 +52,12 @@ def step_inputs(duration_s: float):
 
 
 def judge(truth, diagnosis) -> dict:
-    from thermo_ddp.identify.thermal import FRICTION_KEYS, default_fixed
+    from thermo_ddp.identify.thermal import FRICTION_KEYS
     out = diagnosis.to_dict()
     named = set(diagnosis.missing_physics)
-    # values the fit holds at the parameter file's (default_fixed: the drive's ambient path and i^2 loss of a drive
-    # node) are not estimated, not claimed: listed as held, not judged; every other named value is
-    named_keys = {k for m in out["missing_physics"] for k in m["parameters"]}
-    held = sorted(named_keys & set(default_fixed(diagnosis.final_fit.terms)))
+    # values the fit holds at the parameter file's (the term's "held": the drive's i^2 loss, and a drive node's
+    # ambient path) are not estimated, not claimed: not judged; every other named value is
+    held = sorted({k for m in out["missing_physics"] for k in m.get("held", ())})
     loose = [k for m in out["missing_physics"] for k, v in m["parameters"].items() if k not in held
              and (k not in m["ci95"] or (m["ci95"][k][1] - m["ci95"][k][0]) / 2 > 0.5 * abs(v))]
     errors = []
@@ -93,9 +94,10 @@ def run_case(job: tuple[str | None, int, float]) -> dict:
     out = {"family": family or "random", "seed": seed if family else CASE_SEED + seed,
            "concealed": sorted(truth.concealed), "named_before": before.missing_physics}
     tic = time.perf_counter()
-    design = design_experiment([rec], settings=ExperimentSettings(duration_s=duration_s, progress=False),
-                               diagnosis=before)
-    out |= {"design_status": design.status, "targets": list(design.targets), "design_s": time.perf_counter() - tic}
+    settings = ExperimentSettings(duration_s=duration_s, limit_c=LIMIT_C, progress=False)
+    design = design_experiment([rec], settings=settings, diagnosis=before)
+    out |= {"design_status": design.status, "targets": list(design.targets), "design_s": time.perf_counter() - tic,
+            "duration_s": duration_s}
     if not design.designed:
         return out
     moving = np.abs(rec.velocity[np.abs(rec.velocity) > 0.05])
@@ -126,6 +128,9 @@ def summary(cases: list[dict]) -> dict:
                   "mean_parameter_error": float(np.mean(errors)) if errors else None,
                   "max_peak_winding_c": max((c[m]["peak_winding_c"] for c in done), default=None)}
     out["median_design_s"] = float(np.median([c["design_s"] for c in done])) if done else None
+    # safety: the truth's winding over the limit, or a designed run longer than requested (both must be 0)
+    out["designed_over_limit"] = sum(c["designed"]["peak_winding_c"] > LIMIT_C for c in done)
+    out["designed_over_duration"] = sum(c["designed"]["duration_s"] > c["duration_s"] for c in done)
     return out
 
 
@@ -142,7 +147,10 @@ def main() -> None:
     jobs = [(f, k, args.duration_s) for f in FAMILIES for k in range(args.family_seeds)]
     jobs += [(None, k, args.duration_s) for k in range(args.cases)]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
-        cases = pool.map(run_case, jobs, chunksize=1)
+        cases = []
+        for case in pool.imap(run_case, jobs, chunksize=1):   # each case as it ends (a long run's progress)
+            cases.append(case)
+            print(json.dumps(case), file=sys.stderr, flush=True)
     payload = {"summary": summary([c for c in cases if c["family"] == "random"]),
                "families": {f: summary([c for c in cases if c["family"] == f]) for f in FAMILIES},
                "cases": cases, "duration_s": args.duration_s, "workers": args.workers,
