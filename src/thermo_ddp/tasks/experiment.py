@@ -7,8 +7,10 @@
    knots of ``dt_s`` (a coarse parametrisation of an experiment of up to ``duration_s``).
 3. Criterion (a model-discrimination design after Hunter & Reiner, Technometrics 7, 1965: maximise the squared
    difference of the rival models' predicted responses): the sensor predictions of the reference and of each
-   rival should differ by as many sensor-noise standard deviations as possible at every knot.  The DDP minimises
-   sums of squares, so the divergence d_j = s_j (y_0 - y_j) / sigma (s_j: the sign it has on the start) enters as
+   rival should differ by as many sensor-noise standard deviations as possible at every knot, each prediction
+   counted from its explanation's state at rest (the start): resting temperatures apart are what the passive
+   recordings pin (and a fit's initial offset absorbs), not divergence; the responses to the programme are.  The
+   DDP minimises sums of squares, so the divergence d_j = s_j (y_0 - y_j) / sigma (s_j: its sign on the start) enters as
    the residual (D - d_j) / D with a target D far above the reachable divergence: the cost falls as every d_j
    grows.  sigma: the diagnosis's residual noise.
 4. Constraints on every explanation: the winding under ``limit_c``, the winding never taken below the sensor
