@@ -11,11 +11,12 @@ recording, run on the same truth, and diagnoses both together:
   time, then hold still at the same current (the same RMS current);
 - ``steps``: a plain current-step test at rest: 4 A and 0 A alternating every quarter.
 
-Per method: the share of cases whose design targets alone are settled (``targets_settled_share``: each target named
-exactly and its values within +-50 %), and the share with the exact term set named (the truth's concealed set) AND every named
-parameter identifiable (95 % half-width <= 50 % of its value; a value the fit holds at the parameter
-file's, the drive node's ambient path and i^2 loss, is not estimated: listed as ``held``, not judged); the
-mean relative error of the friction-heat and drive-idle values named where the truth has them; the peak true winding; the wall time of the design.
+Per method: the share of cases whose design targets alone are settled (``targets_settled_share``: each target
+named exactly and its values within +-50 %), and the share with the exact term set named (the truth's concealed
+set) AND every named parameter identifiable (95 % half-width <= 50 % of its value; a value the fit holds at the
+parameter file's, the diagnosis's ``held``: the drive's i^2 loss, a drive node's ambient path, is not estimated,
+not judged); the mean relative error of the friction-heat and drive-idle values named where the truth has them;
+the peak true winding; the wall time of the design; the designs over the limit or the duration (must be 0).
 Writes benchmarks/results/experiment_design.json.
 
 Also issue 25's families (``truths.FAMILIES``: drive + friction heat seen only while moving, friction heat at one
