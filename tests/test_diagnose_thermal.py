@@ -22,7 +22,7 @@ from thermo_ddp.testing.testbed.truths import ThreeNodeTruth, record
 
 CONTRACT_KEYS = {"success", "status", "message", "physics", "recordings", "rows", "baseline", "mismatches",
                  "missing_physics", "not_determinable", "final", "validation", "unexplained"}
-TERM_KEYS = {"term", "evidence", "parameters", "rmse", "p_value", "effect_k", "ci95", "collinear_with"}
+TERM_KEYS = {"term", "evidence", "parameters", "rmse", "p_value", "effect_k", "ci95", "collinear_with", "held"}
 INTERVAL_KEYS = {"recording", "start_s", "end_s", "regime", "mean_residual"}
 SPECIFIC = ("friction_heating", "drive_heating", "casing_node")
 ELBOW = load_joint_parameters(None)
@@ -58,7 +58,7 @@ def test_report_experiments_name_friction_drive_and_the_casing_node(both_effects
     for term in out["missing_physics"]:
         assert set(term) == TERM_KEYS
         assert term["p_value"] * d.selection.n_tests < 1e-3 and term["effect_k"] > 0.01
-        assert set(term["ci95"]) <= set(term["parameters"])
+        assert set(term["ci95"]) <= set(term["parameters"]) and not set(term["ci95"]) & set(term["held"])
     assert out["validation"]["rmse_after"] < 0.3 * out["validation"]["rmse_before"]
     params = parameters_from_dict(out["parameter_file"])
     truth = PlantParameters()

@@ -128,7 +128,7 @@ class ThermalDiagnosis(ThermalOutcome):
                 "parameters": {k: float(fit.parameters[k]) for k in keys}, "rmse": fit.rmse,
                 "p_value": test.p_value, "effect_k": float(np.sqrt(np.mean((fit.fitted - without.fitted) ** 2))),
                 "ci95": {k: [float(v) for v in fit.confidence[k]] for k in keys if k in fit.confidence},
-                "collinear_with": collinear}
+                "collinear_with": collinear, "held": [k for k in keys if k not in fit.stderr]}
 
     def _friction_ratio(self, fit: ThermalFit) -> str:
         """Information only: the fitted friction heat against the file's friction power."""

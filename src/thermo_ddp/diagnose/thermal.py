@@ -10,8 +10,9 @@ term                physics                                                     
 ==================  ==========================================================  =========================================
 friction_heating    heat c1 abs(v) + c2 v^2 (free, >= 0; winding of a one-node  ``friction_heat_linear_w_s_per_rad``,
                     network, casing otherwise), not tied to [motor] friction    ``friction_heat_quadratic_w_s2_per_rad2``
-drive_heating       idle W + W/A^2 i^2 on the sensor node (one node), or a      ``drive_idle_w``, ``drive_loss_w_per_a2``
-                    drive node heating the casing (with the casing node)        (+ ``model = "two_node_drive"``)
+drive_heating       idle W + W/A^2 i^2 on the sensor node (one node; the i^2    ``drive_idle_w``, ``drive_loss_w_per_a2``
+                    loss held: the copper's twin), or a drive node heating the  (+ ``model = "two_node_drive"``)
+                    casing (with the casing node)
 casing_node         winding and casing nodes, sensor on the casing (eq. 6)      ``model = "two_node"``
 copper_resistance   free temperature coefficient of R(T) (eq. 3)                ``[motor] copper_alpha_per_k``
 iron_losses         speed-dependent loss P_ref (abs(v) / 1 rad/s)^2, winding    ``iron_loss_w`` (+ ref speed, exponent)
@@ -36,7 +37,8 @@ thermal rest (a fold predicts from the network's equilibrium).  A term whose hel
 with it than without, beyond the noise of one reading, is withdrawn (``not_determinable`` says why) and
 the selection repeated without it; a tie, or no segment able to judge, is no evidence against it: it
 stands on the in-sample test, as with one recording, and ``not_determinable`` says so.  A chosen
-running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds.
+running loss on data at one speed is listed in ``not_determinable`` with the experiment at several speeds; so are
+the speed terms on data that carry current only while moving (seen in one regime: :func:`_one_regime`).
 
 Outcomes: ``ok``; ``model_does_not_fit`` (``success`` false) when even the chosen model's residual
 is far above the noise (RMSE over ``max_noise_ratio`` times the high-pass residual noise with the
@@ -196,6 +198,21 @@ def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
     return [{"term": t, "reason": reason.format(t), "experiment": experiment} for t in named]
 
 
+def _one_regime(regimes: Sequence[np.ndarray], usable: Sequence[str]) -> list[dict]:
+    """Motion only ever under load and load only ever in motion (no stretch loaded at rest): a running loss then
+    always comes with the copper heat, in one proportion, and reads as a larger thermal resistance (every heat
+    scales with it); the speed terms are listed, named or not (seed report 4.4: friction heat is the difference
+    between a moving and a static phase at the same current)."""
+    labels = np.concatenate(regimes) if regimes else np.zeros(0, str)
+    if not np.any(labels == "moving") or np.any((labels == "static") | (labels == "heating")):
+        return []
+    reason = ("seen in one regime: the joint only carries current while it moves, so a running loss always comes "
+              "with the copper heat and reads as a larger thermal resistance; its presence and values cannot be told")
+    experiment = ("hold the moving phase's current still (e.g. 20 min) next to the motion, and move at a second "
+                  "speed: the running loss is the difference between moving and static at the same current")
+    return [{"term": t, "reason": reason, "experiment": experiment} for t in SPEED_TERMS if t in usable]
+
+
 def _hosted(fit: ThermalFit, grids: Sequence[ThermalGrid], texts: Mapping[str, str]) -> tuple[frozenset, list[dict]]:
     """A casing node whose winding time constant C_w R_wc is shorter than the grid's step is not
     evidenced: the data cannot resolve it.  It stays in the structure when the drive node needs it (the
@@ -310,7 +327,8 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     named = selection.chosen.terms - base - hosted
     fitting, message = _verdict(final, noise, settings, named, cv)
     notes = (tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, named, texts))
-             + tuple(_undetermined(selection, fits, texts)) + tuple(_one_speed(grids, selection.chosen.terms - base)))
+             + tuple(_undetermined(selection, fits, texts)) + tuple(_one_speed(grids, selection.chosen.terms - base))
+             + tuple(_one_regime(regimes, usable)))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise, notes, settings.cv_blocks, hosted, base,
                             held_out, segment_cv, envelope_of(recs))

@@ -7,8 +7,8 @@ differentiates the same expressions the planner integrates.  Structures (``terms
 - ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
 - ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing
   capacities, ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
-- ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (both free, >= 0) on the
-  sensor node of a one-node network (the contract's drive heat without a drive node); with the casing
+- ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (idle free, >= 0; i^2 loss held by
+  default, :func:`default_fixed`) on the sensor node of a one-node network (no drive node); with the casing
   node, a drive node (``two_node_drive``) coupled to the casing and to ambient, heated by the idle loss;
 - ``friction_heating``: free heat ``c1 |v| + c2 v^2`` (``friction_heat_linear_w_s_per_rad``,
   ``friction_heat_quadratic_w_s2_per_rad2``, joint-side v, both >= 0), in the winding of a one-node
@@ -538,9 +538,10 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
 
 
 def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
-    """Keys held at the parameter file's values by default: with only the casing measured, the drive's
-    path to ambient and its current-dependent loss trade off against its idle heat and coupling."""
-    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else ()
+    """Keys held at the file's values: on a casing sensor the drive's ambient path and i^2 loss trade off against its
+    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha): free, every heat scales."""
+    drive = "drive_heating" in terms
+    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else DRIVE_FIXED[1:] if drive else ()
 
 
 def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),

@@ -7,8 +7,10 @@
    knots of ``dt_s`` (a coarse parametrisation of an experiment of up to ``duration_s``).
 3. Criterion (a model-discrimination design after Hunter & Reiner, Technometrics 7, 1965: maximise the squared
    difference of the rival models' predicted responses): the sensor predictions of the reference and of each
-   rival should differ by as many sensor-noise standard deviations as possible at every knot.  The DDP minimises
-   sums of squares, so the divergence d_j = s_j (y_0 - y_j) / sigma (s_j: the sign it has on the start) enters as
+   rival should differ by as many sensor-noise standard deviations as possible at every knot, each prediction
+   counted from its explanation's state at rest (the start): resting temperatures apart are what the passive
+   recordings pin (and a fit's initial offset absorbs), not divergence; the responses to the programme are.  The
+   DDP minimises sums of squares, so the divergence d_j = s_j (y_0 - y_j) / sigma (s_j: its sign on the start) enters as
    the residual (D - d_j) / D with a target D far above the reachable divergence: the cost falls as every d_j
    grows.  sigma: the diagnosis's residual noise.
 4. Constraints on every explanation: the winding under ``limit_c``, the winding never taken below the sensor
@@ -113,11 +115,11 @@ def _pairs(explanations: int) -> list[tuple[int, int]]:
 
 def _functions(model, params, dt_s: float, explanations: int, rise_k_per_w: float):
     """(step(x, u, p, theta), winding(x, u), divergence(X, p), limits(x, u, p)) of the explanations' structure;
-    p = [ambient_c, limit_c, then per pair its sign over its target D_j]."""
+    p = [ambient_c, limit_c, then per pair its sign over its target D_j, then per pair its difference at rest]."""
     n, q = len(model.nodes), len(model.keys)
     x, u, th = ca.SX.sym("x", n), ca.SX.sym("u", 2), ca.SX.sym("theta", q)
     pairs = len(_pairs(explanations))
-    p = ca.SX.sym("p", 2 + pairs)
+    p = ca.SX.sym("p", 2 + 2 * pairs)
     drivers = _drivers(params)(u[0], u[1])
     h = dt_s / SUBSTEPS
     inputs = ca.vertcat(h, drivers[:3], p[0], drivers[3:], p[0])  # INPUT_ROWS: the room at the ambient
@@ -133,7 +135,8 @@ def _functions(model, params, dt_s: float, explanations: int, rise_k_per_w: floa
     limits = ca.Function("limits", [x, u, p], [g], ["x", "u", "p"], ["g"])
     X = ca.SX.sym("X", n, explanations)
     y = X[model.sensor, :]
-    r = ca.vertcat(*[1 - p[2 + k] * (y[i] - y[j]) for k, (i, j) in enumerate(_pairs(explanations))])
+    r = ca.vertcat(*[1 - p[2 + k] * (y[i] - y[j] - p[2 + pairs + k])
+                     for k, (i, j) in enumerate(_pairs(explanations))])
     divergence = ca.Function("divergence", [X, p], [r], ["X", "p"], ["r"])
     return step, winding, divergence, limits
 
@@ -157,10 +160,16 @@ class _Design:
     def pairs(self) -> int:
         return len(_pairs(self.thetas.shape[0]))
 
+    def own(self, scales) -> np.ndarray:
+        """The problem's own parameters: ambient, limit, each pair's sign over its target (``scales``) and each
+        pair's sensor difference at rest (what the passive recordings already pin: not divergence)."""
+        rest = self.sensors(self.x0[None, :])[0]
+        return np.concatenate([[self.ambient_c, self.limit_c], scales, [rest[i] - rest[j] for i, j in
+                                                                        _pairs(self.thetas.shape[0])]])
+
     def params(self, scales) -> np.ndarray:
-        """Per-knot parameters with each pair's sign over its target (``scales``)."""
-        own = np.tile(np.concatenate([[self.ambient_c, self.limit_c], scales]), (self.mm.horizon + 1, 1))
-        return self.mm.params(own, self.thetas)
+        """Per-knot parameters (:meth:`own`) with each pair's sign over its target (``scales``)."""
+        return self.mm.params(np.tile(self.own(scales), (self.mm.horizon + 1, 1)), self.thetas)
 
     def rollout(self, us: np.ndarray) -> np.ndarray:
         """Stacked states along the controls ``us`` (N, 2)."""
@@ -177,12 +186,13 @@ class _Design:
     def windings(self, xs, us) -> np.ndarray:
         """(N+1, K) every explanation's winding (at the last knot with the last control)."""
         states = self.mm.scenario_states(xs)
-        u, p = np.vstack([us, us[-1:]]), [self.ambient_c, self.limit_c, *np.ones(self.pairs)]
+        u, p = np.vstack([us, us[-1:]]), self.own(np.ones(self.pairs))
         return np.array([[float(self.winding(s, uk, p)) for s in st] for st, uk in zip(states, u)])
 
     def divergences(self, xs) -> np.ndarray:
-        """(N+1, pairs) the difference of the sensor predictions of every pair of explanations, in K."""
-        y = self.sensors(xs)
+        """(N+1, pairs) the difference of the sensor predictions of every pair of explanations, in K, each counted
+        from its state at rest (the start, ``xs[0]``): a different resting temperature is no divergence."""
+        y = self.sensors(xs) - self.sensors(self.x0[None, :])[0]
         return np.column_stack([y[:, i] - y[:, j] for i, j in _pairs(y.shape[1])])
 
 
@@ -199,7 +209,8 @@ def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float,
     cross = Cost("divergence", 1.0 / (knots * pairs), _cross(divergence, len(model.nodes), thetas.shape[0]))
     mm = MultiModelProblem(step, knots, thetas.shape[0], costs=[effort], cross_costs=[cross],
                            constraints=[Constraint("winding_and_bus", limits)], u_lb=[0.0, 0.0], u_ub=list(u_max),
-                           parameters=KnotParameters((("ambient_limit", 2), ("pair_scales", pairs))),
+                           parameters=KnotParameters((("ambient_limit", 2), ("pair_scales", pairs),
+                                                      ("rest_differences", pairs))),
                            name="designed_experiment")
     rest = _rest(expl, ambient_c)[0]
     x0 = mm.x0(np.array([np.asarray(model.equilibrium(rest, th)).ravel() for th in thetas]))
@@ -207,7 +218,7 @@ def _build(expl: Explanations, sigma_c: float, limit_c: float, ambient_c: float,
 
 
 def _cross(divergence: ca.Function, n: int, explanations: int) -> ca.Function:
-    X, p = ca.SX.sym("X", n, explanations), ca.SX.sym("p", 2 + len(_pairs(explanations)))
+    X, p = ca.SX.sym("X", n, explanations), ca.SX.sym("p", 2 + 2 * len(_pairs(explanations)))
     return ca.Function("r", [X, p], [divergence(X, p)], ["X", "p"], ["r"])
 
 
