@@ -152,7 +152,7 @@ def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
     hold of the planner's model (the sweep's --nominal-plan): with the back-off band hard the plan shortens the
     hold further (measured: 7.0 s; soft 7.4 s). Both keep planning once the estimate passes the hard limit: the
     window's limit is raised to what the warm start reaches (``reachable_limit``; before it, the hard band fell
-    back in 43 periods, the soft one in 8; measured now 0 and 7, the soft band's at the lowering's stop). The
+    back in 43 periods, the soft one in 8; measured now 1 and 7, the soft band's at the lowering's stop). The
     true limit holds. (With the sweep's robust hold both bands plan 4.7 s without a fallback: the set's margin
     keeps the winding out of the band.)"""
     from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER
