@@ -28,6 +28,10 @@ the count is ``ipopt_checks_reused``); IPOPT from DDP's plan is always solved.
     .venv/bin/python benchmarks/bench_planner_verdicts.py --quick    # 8 requests
     .venv/bin/python benchmarks/bench_planner_verdicts.py --recheck  # older results: IPOPT two knots past
     .venv/bin/python benchmarks/bench_planner_verdicts.py --workers 2 --reuse old.json  # IPOPT's verdicts kept
+    .venv/bin/python benchmarks/bench_planner_verdicts.py --request '{"payload_kg": 38.4, "limit_c": 88.0, ...}'
+
+A disagreement also gets ``cross_starts`` (:func:`cross_starts`): at DDP's hold, IPOPT and DDP each from its own
+start and from the other's solution, to tell a solver that stopped short from distinct local optima.
 """
 from __future__ import annotations
 
@@ -164,6 +168,38 @@ def ipopt_from_ddp(request: dict, ddp: dict, plan, cold: dict | None = None) -> 
     return checks
 
 
+def _landing(result) -> dict:
+    """Where a solve landed: its verdict, status, cost, largest violation and final stationarity (DDP: its own
+    projected |Qu|; IPOPT: the KKT residual, with its own dynamics multipliers)."""
+    stat = result.kkt["stationarity"] if not result.solver.startswith("ddp") else float(
+        np.asarray(result.history["stationarity"])[-1])
+    return {**_check(result), "iterations": int(result.iterations), "violation": float(result.max_constraint_violation),
+            "stationarity": float(stat)}
+
+
+def cross_starts(request: dict, ddp: dict, plan) -> dict:
+    """At DDP's hold (for "infeasible": touching the goal), each solver from its own start and from the other's
+    solution: IPOPT from DDP's plan; DDP from IPOPT's own-start solution, with its trajectories only (as the
+    search warm-starts) and with IPOPT's constraint multipliers too. Two solvers that each stay where the other
+    landed have found distinct local optima of the same transcription; one that moves to the other's point had
+    stopped short (a tolerance or stopping-rule issue)."""
+    from thermo_ddp.solvers import WarmStart
+    from thermo_ddp.tasks.lift import LiftSettings, build_lift_problem, initial_guess, make_solver
+    lp = build_lift_problem(LiftSettings(**request))
+    knots = round(ddp["achieved_hold_s"] / lp.settings.dt_s) if ddp["status"] != "infeasible" else 0
+    at = lp.with_hold(knots * lp.settings.dt_s)
+    ddp_solver, ipopt = make_solver(lp, "ddp"), make_solver(lp, "ipopt")
+    own = ipopt.solve(at.x0, at.params, initial_guess(at))
+    lam = {k: own.multipliers[k] for k in ("constraints", "terminal_constraints") if k in own.multipliers}
+    return {"hold_knots": knots, "ddp_plan_cost": ddp["cost"],
+            "ddp_own_start": _landing(ddp_solver.solve(at.x0, at.params, initial_guess(at))),
+            "ipopt_own_start": _landing(own),
+            "ipopt_from_ddp_plan": _landing(ipopt.solve(at.x0, at.params, WarmStart(plan.xs, plan.us))),
+            "ddp_from_ipopt": _landing(ddp_solver.solve(at.x0, at.params, WarmStart(own.xs, own.us))),
+            "ddp_from_ipopt_with_multipliers": _landing(ddp_solver.solve(at.x0, at.params,
+                                                                         WarmStart(own.xs, own.us, lam)))}
+
+
 def certified(ddp: dict, ipopt: dict) -> bool:
     """DDP's verdict holds from both starts: its hold is feasible for IPOPT started from DDP's plan at DDP's cost
     (1e-3), and the longest hold is within one knot of it: one knot more, or else two knots more, is infeasible
@@ -187,7 +223,7 @@ def certified(ddp: dict, ipopt: dict) -> bool:
 
 def certify(args):
     """The disagreeing rows of results/planner_verdicts.json judged again by :func:`certified` (DDP planned
-    again, IPOPT started from its plan; IPOPT's own-start verdicts kept)."""
+    again, IPOPT started from its plan; IPOPT's own-start verdicts kept), with their :func:`cross_starts`."""
     data = json.loads((RESULTS / "planner_verdicts.json").read_text())
     for row in data["rows"]:
         if row["comparison"] != "disagree":
@@ -198,6 +234,7 @@ def certify(args):
             print(row["request"], "DDP planned otherwise this time: left as it was", flush=True)
             continue
         row["ipopt"]["from_ddp"] = ipopt_from_ddp(row["request"], ddp, plan, row["ipopt"]["checks"])
+        row["ipopt"]["cross_starts"] = cross_starts(row["request"], ddp, plan)
         row["certified"] = certified(row["ddp"], row["ipopt"])
         print(row["request"], row["ipopt"]["from_ddp"], row["certified"], flush=True)
     args.seed = data["summary"]["seed"]
@@ -230,6 +267,7 @@ def run_pair(request: dict, full_ipopt: bool = False, cached: dict | None = None
     if compare(ddp, ipopt) == "disagree":
         try:
             ipopt["from_ddp"] = ipopt_from_ddp(request, ddp, plan, ipopt["checks"])
+            ipopt["cross_starts"] = cross_starts(request, ddp, plan)
         except Exception:  # noqa: BLE001 - the count the benchmark exists for
             return ddp, {"outcome": "traceback", "message": traceback.format_exc(limit=3)}
     return ddp, ipopt
@@ -257,6 +295,9 @@ def main():
                     help="judge the disagreeing rows of results/planner_verdicts.json again by the certified criterion")
     ap.add_argument("--rerun-careful-off", action="store_true",
                     help="plan again the requests of results/planner_verdicts.json with careful motion off")
+    ap.add_argument("--request", action="append", type=json.loads, metavar="JSON",
+                    help="plan this request (a LiftSettings mapping, e.g. '{\"payload_kg\": 38.4, ...}') instead of "
+                         "random ones; repeatable; results in results/planner_verdicts_chosen.json")
     ap.add_argument("--recheck", action="store_true",
                     help="re-judge results/planner_verdicts.json: IPOPT two knots past DDP's hold where it held one")
     args = ap.parse_args()
@@ -268,7 +309,8 @@ def main():
         return rerun_careful_off(args)
     n = 8 if args.quick else args.requests
     rng = np.random.default_rng(args.seed)
-    requests = [random_request(rng) for _ in range(n)]
+    requests = args.request or [random_request(rng) for _ in range(n)]
+    n = len(requests)
     rows, cache = [], _cached_checks(args.reuse)
     cached = [cache.get(_request_key(r)) for r in requests]
     with concurrent.futures.ProcessPoolExecutor(args.workers) as pool:
@@ -346,7 +388,7 @@ def _write(args, n, rows):
         "ddp_solves_max": max((p["solves"] for p in plans), default=None),
         "ddp_wall_s_total": float(sum(p["wall_s"] for p in plans)),
         "ipopt_wall_s_total": float(sum(p["wall_s"] for p in ipopt))}
-    write("planner_verdicts", {"summary": summary, "disagreements": [r for r in rows if r["comparison"] == "disagree"],
+    write("planner_verdicts_chosen" if getattr(args, "request", None) else "planner_verdicts", {"summary": summary, "disagreements": [r for r in rows if r["comparison"] == "disagree"],
                                "rows": rows})
     print({k: v for k, v in summary.items() if k not in ("ddp_ladder",)}, flush=True)
 

@@ -204,3 +204,36 @@ def test_warm_start_moves_the_multipliers_one_knot_and_frees_the_present_states_
     np.testing.assert_array_equal(moved[-1], lam[-1])
     np.testing.assert_array_equal(warm.xs[:-1], xs[1:])
     assert np.all(warm.multipliers["penalty"] == 1e6)
+
+
+
+def test_a_winding_estimated_over_the_limit_gets_the_limit_it_can_reach():
+    """An estimate over the hard winding limit (the plant ran hotter than planned): no current cools the winding
+    under it within a period, so with the window's limit every re-solve is infeasible at knot 1 (the sweep's
+    fallback periods). The controller raises the limit, knot by knot, to the winding the warm start's currents
+    reach, at most the estimate's own winding, plus 1e-4 K (oracle: the model's step rolled out here), and leaves
+    a cool estimate's window as it is.
+    (The closed loops: test_mpc_faults.py::test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant.)"""
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
+    model, _ = build_models(settings)
+    lp = planning_problem(settings, model)
+    controller = RecedingHorizonController(lp, settings, mpc_solver(lp, settings))
+    controller.start(lp.x0)
+    warm, window = controller.warm_start(1), controller.window(1)
+    assert controller.reachable_limit(window, lp.x0, warm) is window   # a cool estimate: nothing to raise
+    hot = lp.x0.copy()
+    hot[2:] = settings.planning_limit_c + settings.scenario.backoff_c + 0.3
+    raised = controller.reachable_limit(window, hot, warm)
+    x, reached = hot, []
+    for j in range(lp.problem.horizon):
+        x = np.array(lp.problem.functions.step(x, warm.us[j], window[j])).ravel()
+        reached.append(x[model.node_indices("winding")[0]])
+    cols = lp.problem.parameters.slice("limit_c")
+    now = hot[model.node_indices("winding")[0]]   # never planned hotter than the estimate
+    expected = np.maximum(window[1:, cols].ravel(), np.minimum(reached, now) - settings.scenario.backoff_c + 1e-4)
+    np.testing.assert_allclose(raised[1:, cols].ravel(), expected, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(raised[0], window[0])
+    other = np.ones(window.shape[1], bool)
+    other[cols] = False
+    np.testing.assert_array_equal(raised[:, other], window[:, other])
+    assert raised[1, cols] > window[1, cols]

@@ -147,12 +147,14 @@ def test_robustness_sweep_has_no_violation():
     assert s["min_margin_c"] >= 0 and len(out.runs) == 4
 
 
-def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back():
+def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
     """A plant that runs hotter than planned (winding-casing resistance +11 %, less capacity, warm start), the
-    hold of the planner's model (the sweep's --nominal-plan): with the back-off band hard the re-solves near the
-    limit fail and the plan shortens the hold further (measured: 43 fallback periods, 7.0 s; soft: 8, 7.4 s);
-    with the band soft (the default), most periods are planned and the true limit holds. (With the sweep's robust
-    hold both bands plan 4.7 s without a fallback: the set's margin keeps the winding out of the band.)"""
+    hold of the planner's model (the sweep's --nominal-plan): with the back-off band hard the plan shortens the
+    hold further (measured: 7.0 s; soft 7.4 s). Both keep planning once the estimate passes the hard limit: the
+    window's limit is raised to what the warm start reaches (``reachable_limit``; before it, the hard band fell
+    back in 43 periods, the soft one in 8; measured now 1 and 7, the soft band's at the lowering's stop). The
+    true limit holds. (With the sweep's robust hold both bands plan 4.7 s without a fallback: the set's margin
+    keeps the winding out of the band.)"""
     from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER
 
     draw = dict(plant_thermal_scales=(("winding_capacity_j_per_k", 0.956), ("casing_capacity_j_per_k", 0.857),
@@ -165,9 +167,9 @@ def test_soft_backoff_plans_through_a_hotter_plant_where_the_hard_one_falls_back
         results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
     hard, soft = results[0.0], results[1e4]
     fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
-    assert hard.hold_s[-1] < soft.hold_s[-1] and fallbacks[0.0] >= 10, (hard.message, fallbacks)
-    assert fallbacks[1e4] <= fallbacks[0.0] / 4, fallbacks
-    assert soft.success and soft.margin_c > 0
+    assert hard.hold_s[-1] < soft.hold_s[-1], (hard.message, soft.message)
+    assert max(fallbacks.values()) <= 8, fallbacks
+    assert all(r.success and r.margin_c > 0 for r in results.values())
 
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):

@@ -21,6 +21,7 @@ set (:mod:`thermo_ddp.mpc.robust`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 
 import casadi as ca
@@ -160,6 +161,10 @@ def mpc_ddp_settings(max_iterations: int) -> DDPSettings:
 # t = 12.5 s ended on a failed line search, which cut the hold to 10.8 s (margin 2.08 K); over 3 iterates the
 # start plans 11.6 s, held to the end (0.59 K).
 MPC_NONMONOTONE_MEMORY = 3
+# RecedingHorizonController.reachable_limit: checked when the estimate is within this of the hard winding limit,
+# raised to the warm start's winding plus this margin (a tenth of the accepted violation, feasibility_tolerance).
+REACHABLE_CHECK_C = 0.1
+REACHABLE_MARGIN_C = 1e-4
 
 
 def shifted_warm_start(result: SolverResult, problem: OptimalControlProblem, shift: int = 1,
@@ -290,11 +295,11 @@ class RecedingHorizonController:
         self.k += 1
         age = self.plan_age + 1
         warm = self.warm_start(age)
-        result = self.solver.solve(x_est, self.window(), warm)
+        result = self.solver.solve(x_est, self.reachable_limit(self.window(), x_est, warm), warm)
         results, status = [result], "solved"
         while (not self._acceptable(result) and not self._late(sum(r.solve_s for r in results))
                and len(results) <= self.settings.controller.max_retries and self._shorten()):
-            result = self.solver.solve(x_est, self.window(), warm)
+            result = self.solver.solve(x_est, self.reachable_limit(self.window(), x_est, warm), warm)
             results.append(result)
             status = "hold_shortened"
         t = self.k * self.lp.settings.dt_s
@@ -322,6 +327,36 @@ class RecedingHorizonController:
                            solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
                            iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
                            cost=result.cost, events=tuple(events))
+
+    def reachable_limit(self, params: np.ndarray, x0: np.ndarray, warm: WarmStart) -> np.ndarray:
+        """The window ``params`` with the winding limit raised, knot by knot, to the winding the warm start's
+        currents reach from ``x0``, at most ``x0``'s own (never planned hotter than now), plus
+        :data:`REACHABLE_MARGIN_C`, where that is over the hard limit: a winding estimated over the limit cannot
+        cool under it within a period or a few, whatever the current, so the hard row there would make every
+        re-solve infeasible and hand the period to the fallback. The back-off band's cost still pulls the winding
+        down. Unchanged (no rollout) while the estimate is more than :data:`REACHABLE_CHECK_C` under the hard
+        limit. Measured (nominal sweep, seed 3681211716): without the cap at ``x0``'s winding the plans braked
+        on heat the fallback's derating would not allow (margin 0.49 K against 0.83 K)."""
+        layout = self.lp.problem.parameters
+        cols = layout.slice("limit_c")
+        hard = params[1:, cols] + self._backoff_c
+        if np.max(np.asarray(x0)[self._winding]) < np.min(hard) - REACHABLE_CHECK_C:
+            return params
+        xs = np.asarray(self._rollout(x0, warm.us.T, params[:-1].T)).T   # x_1 .. x_N
+        now = np.asarray(x0)[self._winding]
+        reached = np.minimum(xs[:, self._winding], now) - self._backoff_c + REACHABLE_MARGIN_C
+        out = np.array(params, dtype=float)
+        out[1:, cols] = np.maximum(out[1:, cols], reached)
+        return out
+
+    @functools.cached_property
+    def _rollout(self) -> ca.Function:
+        return self.lp.problem.functions.step.mapaccum(self.lp.problem.horizon)
+
+    @property
+    def _backoff_c(self) -> float:
+        """K between the window's limit_c and the hard winding row (:func:`planner_ocp`: soft back-off band)."""
+        return self.settings.scenario.backoff_c if self.settings.controller.backoff_weight_per_k2 > 0 else 0.0
 
     def warm_start(self, shift: int = 1) -> WarmStart:
         """The plan shifted by ``shift`` knots with its multipliers (:func:`shifted_warm_start`)."""
