@@ -39,8 +39,9 @@ class _Fitter:
     """Fits of term sets (multi-start), their admissibility and blocked cross-validation."""
 
     def __init__(self, params: JointParameters, grids: Sequence[ThermalGrid], settings: ThermalDiagnosisSettings,
-                 specs: Mapping[str, TermSpec], bar):
+                 specs: Mapping[str, TermSpec], bar, room_stand_in: bool = False):
         self.params, self.grids, self.settings, self.bar = params, list(grids), settings, bar
+        self.room_stand_in = room_stand_in  # the drive term stands in for an unlogged room (default_fixed)
         self.bounds = {k: b for spec in specs.values() for k, b in spec.bounds.items()}
         self.fits: dict[frozenset, ThermalFit] = {}
         self._models: dict[frozenset, ThermalModel] = {}
@@ -50,7 +51,7 @@ class _Fitter:
         if terms not in self._models:
             ordered = canonical_terms("one_node", terms)
             values = start_values(self.params, ordered)
-            self._models[terms] = ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered)})
+            self._models[terms] = ThermalModel(self.params, ordered, {k: values[k] for k in default_fixed(ordered, self.room_stand_in)})
         return self._models[terms]
 
     def fit(self, terms: frozenset) -> ThermalFit:

@@ -243,7 +243,7 @@ def _select(params: JointParameters, grids, settings: ThermalDiagnosisSettings, 
     """Fit every term set, select (nested tests, held out), validate: (fitter, selection, held_out, cv, segment_cv)."""
     hide = None if settings.progress is None else not settings.progress
     with tqdm(desc="thermal diagnosis fits", unit="fit", disable=hide) as bar:
-        fitter = _Fitter(params, grids, settings, term_specs(params), bar)
+        fitter = _Fitter(params, grids, settings, term_specs(params), bar, room_stand_in="drive_heating" in base)
         sets = [frozenset(c) | base for k in range(len(usable) + 1) for c in itertools.combinations(usable, k)]
         if base:  # the plain one-node fit starts the baseline's (from the file's values alone it can stall far off)
             fitter.fit(frozenset())

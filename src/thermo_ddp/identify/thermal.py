@@ -316,15 +316,17 @@ class ThermalFit(FitResult):
 
     @property
     def confidence(self) -> dict[str, tuple[float, float]]:
-        """95 % intervals; log-normal for the parameters fitted in log-space (always positive)."""
+        """95 % intervals; log-normal for the parameters fitted in log-space (always positive); never wider
+        than the range the fit searched (a value the data leave open spans that range, not 1e-300 to 1e300)."""
         out = {}
         for key, err in self.stderr.items():
-            value = self.parameters[key]
-            if _SEARCH[key][0] == "log" and value > 0:
+            value, (kind, low, high) = self.parameters[key], _SEARCH[key][:3]
+            if kind == "log" and value > 0:
                 factor = math.exp(min(Z95 * err / value, 700.0))  # no OverflowError: ~1e304, beyond any bound
-                out[key] = (value / factor, value * factor)
+                lo, hi = value / factor, value * factor
             else:
-                out[key] = (value - Z95 * err, value + Z95 * err)
+                lo, hi = value - Z95 * err, value + Z95 * err
+            out[key] = (min(max(lo, low), value), max(min(hi, high), value))
         return out
 
 
@@ -537,11 +539,16 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
     return load_parameters(parameters if parameters is not None else packaged_parameter_file("arm_left_4_joint"))
 
 
-def default_fixed(terms: Sequence[str]) -> tuple[str, ...]:
+def default_fixed(terms: Sequence[str], room_stand_in: bool = False) -> tuple[str, ...]:
     """Keys held at the file's values: on a casing sensor the drive's ambient path and i^2 loss trade off against its
-    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha): free, every heat scales."""
+    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha): free, every heat scales.
+    Where the drive term stands in for an unlogged room (``room_stand_in``) it is no drive: its i^2 part stays free
+    and takes up the file's copper error (UR3 J2, ahead of a speed loss named in sample that the later stretch
+    rejects: 0.128 K free against 0.194 K held)."""
     drive = "drive_heating" in terms
-    return DRIVE_FIXED if network_model(terms) == "two_node_drive" else DRIVE_FIXED[1:] if drive else ()
+    if network_model(terms) == "two_node_drive":
+        return DRIVE_FIXED
+    return DRIVE_FIXED[1:] if drive and not room_stand_in else ()
 
 
 def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),
