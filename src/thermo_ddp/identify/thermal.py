@@ -316,17 +316,15 @@ class ThermalFit(FitResult):
 
     @property
     def confidence(self) -> dict[str, tuple[float, float]]:
-        """95 % intervals; log-normal for the parameters fitted in log-space (always positive); never wider
-        than the range the fit searched (a value the data leave open spans that range, not 1e-300 to 1e300)."""
+        """95 % intervals; log-normal for the parameters fitted in log-space (always positive)."""
         out = {}
         for key, err in self.stderr.items():
-            value, (kind, low, high) = self.parameters[key], _SEARCH[key][:3]
-            if kind == "log" and value > 0:
+            value = self.parameters[key]
+            if _SEARCH[key][0] == "log" and value > 0:
                 factor = math.exp(min(Z95 * err / value, 700.0))  # no OverflowError: ~1e304, beyond any bound
-                lo, hi = value / factor, value * factor
+                out[key] = (value / factor, value * factor)
             else:
-                lo, hi = value - Z95 * err, value + Z95 * err
-            out[key] = (min(max(lo, low), value), max(min(hi, high), value))
+                out[key] = (value - Z95 * err, value + Z95 * err)
         return out
 
 
@@ -573,6 +571,13 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
     return fit_grids(structure, grids, start=start, settings=settings)
 
 
+def _searched(key: str, value: float, lo: float, hi: float) -> list[float]:
+    """A 95 % interval as the file holds it: never wider than the range the fit searched (a value the data leave
+    open spans that range, not 1e-300 to 1e300, which overflowed validate's band on UR3 joints)."""
+    low, high = _SEARCH[key][1:3]
+    return [min(max(lo, low, 0.0), value), max(min(hi, high), value)]
+
+
 def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = (),
                    envelope: Mapping[str, Sequence[float]] | None = None) -> dict:
     """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
@@ -580,7 +585,8 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
     (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
-    finite = {_path(k): [max(lo, 0.0), hi] for k, (lo, hi) in fit.confidence.items() if math.isfinite(hi - lo)}
+    finite = {_path(k): _searched(k, fit.parameters[k], lo, hi) for k, (lo, hi) in fit.confidence.items()
+              if math.isfinite(hi - lo)}
     if finite:  # a value the data do not pin down has no finite interval: not written
         data["uncertainty"] = finite
     if envelope:
