@@ -72,6 +72,8 @@ from .network_diagnosis import NetworkDiagnosis, diagnose_network
 from .selection import HeldOutCheck, SubsetSelection, SubsetSettings, select_held_out
 
 log = logging.getLogger(__name__)
+PROPORTION_WINDOW_S = 300.0  # the thermal time scale over which heat and motion are compared (minutes)
+ONE_PROPORTION = 0.1        # relative misfit of heat = a |v| below which they come in one proportion
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,13 +200,34 @@ def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
     return [{"term": t, "reason": reason.format(t), "experiment": experiment} for t in named]
 
 
-def _one_regime(regimes: Sequence[np.ndarray], usable: Sequence[str]) -> list[dict]:
-    """Motion only ever under load and load only ever in motion (no stretch loaded at rest): a running loss then
-    always comes with the copper heat, in one proportion, and reads as a larger thermal resistance (every heat
+def _window_mean(time_s: np.ndarray, values: np.ndarray, window_s: float) -> np.ndarray:
+    """The mean of ``values`` over the ``window_s`` before each sample (time-weighted by sample count)."""
+    total = np.concatenate([[0.0], np.cumsum(values)])
+    start = np.searchsorted(time_s, time_s - window_s, side="left")
+    stop = np.arange(1, len(values) + 1)
+    return (total[stop] - total[start]) / (stop - start)
+
+
+def _in_one_proportion(grids: Sequence[ThermalGrid]) -> bool:
+    """Whether the copper heat (i^2) and the motion (|v|) come and go in one proportion on the thermal time scale:
+    their means over :data:`PROPORTION_WINDOW_S` fit heat = a |v| within :data:`ONE_PROPORTION` (relative).  A
+    motor that turns at one speed under two loads (Paderborn profile 24) does not: its running loss is separable."""
+    heat = np.concatenate([_window_mean(g.time_s, g.current_a ** 2, PROPORTION_WINDOW_S) for g in grids])
+    run = np.concatenate([_window_mean(g.time_s, np.abs(g.velocity), PROPORTION_WINDOW_S) for g in grids])
+    if not run @ run > 0 or not heat @ heat > 0:
+        return False
+    return bool(np.linalg.norm(heat - (heat @ run) / (run @ run) * run) <= ONE_PROPORTION * np.linalg.norm(heat))
+
+
+def _one_regime(grids: Sequence[ThermalGrid], regimes: Sequence[np.ndarray], usable: Sequence[str]) -> list[dict]:
+    """Motion only ever under load and load only ever in motion (no stretch loaded at rest), in one proportion: a
+    running loss then always comes with the copper heat and reads as a larger thermal resistance (every heat
     scales with it); the speed terms are listed, named or not (seed report 4.4: friction heat is the difference
     between a moving and a static phase at the same current)."""
     labels = np.concatenate(regimes) if regimes else np.zeros(0, str)
     if not np.any(labels == "moving") or np.any((labels == "static") | (labels == "heating")):
+        return []
+    if not _in_one_proportion(grids):
         return []
     reason = ("seen in one regime: the joint only carries current while it moves, so a running loss always comes "
               "with the copper heat and reads as a larger thermal resistance; its presence and values cannot be told")
@@ -328,7 +351,7 @@ def diagnose_thermal(recordings, *, parameters: JointParameters | str | Path | N
     fitting, message = _verdict(final, noise, settings, named, cv)
     notes = (tuple(skipped) + tuple(unresolved) + tuple(_held_out_notes(held_out, named, texts))
              + tuple(_undetermined(selection, fits, texts)) + tuple(_one_speed(grids, selection.chosen.terms - base))
-             + tuple(_one_regime(regimes, usable)))
+             + tuple(_one_regime(grids, regimes, usable)))
     return ThermalDiagnosis(names, params, grids, fitting, "ok" if fitting else "model_does_not_fit", message,
                             rows, regimes, selection, fits, locs, cv, noise, notes, settings.cv_blocks, hosted, base,
                             held_out, segment_cv, envelope_of(recs))
