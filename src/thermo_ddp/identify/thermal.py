@@ -1,48 +1,46 @@
 """Thermal identification: output-error nonlinear least squares on the simulated sensor temperature.
 
 The model is the package's lumped network (``thermo_ddp.model.thermal``) fed by the motor's losses
-(``thermo_ddp.model.motor``), built with the free parameters as CasADi symbols, so the fit
-differentiates the same expressions the planner integrates.  Structures (``terms``):
+(``thermo_ddp.model.motor``), built with the free parameters as CasADi symbols, so the fit differentiates the same
+expressions the planner integrates.  Structures (``terms``):
 
 - ``one_node`` (seed report eq. 7 with R(T), eq. 5): free ``capacity_j_per_k``, ``resistance_k_per_w``;
-- ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing
-  capacities, ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
+- ``casing_node`` -> ``two_node`` (eq. 6; the sensor is on the casing): winding and casing capacities,
+  ``winding_casing_k_per_w``, ``casing_ambient_k_per_w``;
 - ``drive_heating``: the drive's ``drive_idle_w + drive_loss_w_per_a2 i^2`` (idle free, >= 0; i^2 loss held by
-  default, :func:`default_fixed`) on the sensor node of a one-node network (no drive node); with the casing
-  node, a drive node (``two_node_drive``) coupled to the casing and to ambient, heated by the idle loss;
+  default, :func:`default_fixed`) on the sensor node of a one-node network (no drive node); with the casing node, a
+  drive node (``two_node_drive``) coupled to the casing and to ambient, heated by the idle loss;
 - ``friction_heating``: free heat ``c1 |v| + c2 v^2`` (``friction_heat_linear_w_s_per_rad``,
-  ``friction_heat_quadratic_w_s2_per_rad2``, joint-side v, both >= 0), in the winding of a one-node
-  network and in the casing otherwise (gearbox and bearings sit on the housing); not tied to the
-  friction of [motor] (gearbox heat may be several times the identified joint friction);
+  ``friction_heat_quadratic_w_s2_per_rad2``, joint-side v, both >= 0), in the winding of a one-node network and in
+  the casing otherwise (gearbox and bearings sit on the housing); not tied to the friction of [motor] (gearbox heat
+  may be several times the identified joint friction);
 - ``copper_resistance``: ``copper_alpha_per_k`` free (eq. 3);
-- ``iron_losses``: ``iron_loss_w_s2_per_rad2`` k, a speed-dependent loss k v^2 (joint-side v) in the
-  winding node: the contract's iron loss with ``iron_loss_w`` = k at 1 rad/s and exponent 2.
+- ``iron_losses``: ``iron_loss_w_s2_per_rad2`` k, a speed-dependent loss k v^2 (joint-side v) in the winding node:
+  the contract's iron loss with ``iron_loss_w`` = k at 1 rad/s and exponent 2.
 
-The file's other optional [thermal] keys (``sensor``, the contract's friction heat, drive losses
-without a drive node) are held at their values in every structure: the network is the planner's
-(``network_from_parameters``, heated through ``joint_heat_rhs``).
+The file's other optional [thermal] keys (``sensor``, the contract's friction heat, drive losses without a drive
+node) are held at their values in every structure: the network is the planner's (``network_from_parameters``, heated
+through ``joint_heat_rhs``).
 
-Simulation: each recording on its own (possibly irregular) time grid, inputs held between samples
-(zero-order hold).  Samples closer than ``min_step_s`` are merged (the held losses are averaged
-exactly over the merged interval; residuals only at the kept samples), intervals longer than
-``max_step_s`` (gaps) are cut into sub-steps.  The network is affine in the temperatures for held
-inputs; each (sub-)step is the trapezoidal rule (A-stable, 2nd order) solved exactly for that affine
-system.  Sensitivities d(temperature)/d(parameters) are propagated with the states (forward
+Simulation: each recording on its own (possibly irregular) time grid, inputs held between samples (zero-order hold).
+Samples closer than ``min_step_s`` are merged (the held losses are averaged exactly over the merged interval;
+residuals only at the kept samples), intervals longer than ``max_step_s`` (gaps) are cut into sub-steps.  The network
+is affine in the temperatures for held inputs; each (sub-)step is the trapezoidal rule (A-stable, 2nd order) solved
+exactly for that affine system.  Sensitivities d(temperature)/d(parameters) are propagated with the states (forward
 sensitivities of the step, CasADi AD, one ``mapaccum`` per recording), not by finite differences.
 
-A second measurement when the recording logs ``voltage_v``: resistance thermometry of the winding
-(R(T) = (V - K_b N v) / i at standstill, report eqs. 2-4), weighed by its noise at each sample's current
-(see :class:`ThermalSettings`). It informs the winding node, which a casing sensor barely sees; a
-one-node model has no winding apart from its sensor and ignores it.
+A second measurement when the recording logs ``voltage_v``: resistance thermometry of the winding (R(T) = (V - K_b N
+v) / i at standstill, report eqs. 2-4), weighed by its noise at each sample's current (see :class:`ThermalSettings`).
+It informs the winding node, which a casing sensor barely sees; a one-node model has no winding apart from its sensor
+and ignores it.
 
-Initial state per recording: the network's equilibrium under the first held inputs, plus a fitted
-offset common to all nodes (``initial_offset_c``): the sensor's initial temperature is fitted, the
-unmeasured nodes start in the same relation to it as at equilibrium.
+Initial state per recording: the network's equilibrium under the first held inputs, plus a fitted offset common to
+all nodes (``initial_offset_c``): the sensor's initial temperature is fitted, the unmeasured nodes start in the same
+relation to it as at equilibrium.
 
-Confidence intervals: the classical s^2 (J^T J)^-1 assumes white residuals; output-error residuals
-are autocorrelated, so the standard errors are inflated by sqrt(integrated autocorrelation time) of
-the residual (an effective-sample-size correction, Geyer's initial positive sequence).  They remain
-local, linearised intervals.
+Confidence intervals: the classical s^2 (J^T J)^-1 assumes white residuals; output-error residuals are
+autocorrelated, so the standard errors are inflated by sqrt(integrated autocorrelation time) of the residual (an
+effective-sample-size correction, Geyer's initial positive sequence).  They remain local, linearised intervals.
 """
 from __future__ import annotations
 
@@ -539,14 +537,11 @@ def load_joint_parameters(parameters: JointParameters | str | Path | None) -> Jo
 
 def default_fixed(terms: Sequence[str], room_stand_in: bool = False) -> tuple[str, ...]:
     """Keys held at the file's values: on a casing sensor the drive's ambient path and i^2 loss trade off against its
-    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha): free, every heat scales.
-    Where the drive term stands in for an unlogged room (``room_stand_in``) it is no drive: its i^2 part stays free
-    and takes up the file's copper error (UR3 J2, ahead of a speed loss named in sample that the later stretch
-    rejects: 0.128 K free against 0.194 K held)."""
-    drive = "drive_heating" in terms
+    idle heat and coupling; on one node its i^2 loss is the copper's R i^2 (bar alpha), unless the term only stands
+    in for an unlogged room (free, it takes up the file's copper error: UR3 J2 later stretch 0.128 K, held 0.194 K)."""
     if network_model(terms) == "two_node_drive":
         return DRIVE_FIXED
-    return DRIVE_FIXED[1:] if drive and not room_stand_in else ()
+    return DRIVE_FIXED[1:] if "drive_heating" in terms and not room_stand_in else ()
 
 
 def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str] = (),
@@ -571,13 +566,6 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
     return fit_grids(structure, grids, start=start, settings=settings)
 
 
-def _searched(key: str, value: float, lo: float, hi: float) -> list[float]:
-    """A 95 % interval as the file holds it: never wider than the range the fit searched (a value the data leave
-    open spans that range, not 1e-300 to 1e300, which overflowed validate's band on UR3 joints)."""
-    low, high = _SEARCH[key][1:3]
-    return [min(max(lo, low, 0.0), value), max(min(hi, high), value)]
-
-
 def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = (),
                    envelope: Mapping[str, Sequence[float]] | None = None) -> dict:
     """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
@@ -585,13 +573,13 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
     (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
     data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
-    finite = {_path(k): _searched(k, fit.parameters[k], lo, hi) for k, (lo, hi) in fit.confidence.items()
-              if math.isfinite(hi - lo)}
+    values = dict(fit.parameters)  # each interval within the range searched (not 1e-303 to 1e305 K/W)
+    finite = {_path(k): [min(max(lo, _SEARCH[k][1], 0.0), values[k]), max(min(hi, _SEARCH[k][2]), values[k])]
+              for k, (lo, hi) in fit.confidence.items() if math.isfinite(hi - lo)}
     if finite:  # a value the data do not pin down has no finite interval: not written
         data["uncertainty"] = finite
     if envelope:
         data["envelope"] = {k: list(v) for k, v in envelope.items()}
-    values = dict(fit.parameters)
     model = network_model(fit.terms)
     data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()
     if "copper_alpha_per_k" in values:
