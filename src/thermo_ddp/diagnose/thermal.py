@@ -201,7 +201,7 @@ def _one_speed(grids: Sequence[ThermalGrid], chosen: frozenset) -> list[dict]:
 
 
 def _window_mean(time_s: np.ndarray, values: np.ndarray, window_s: float) -> np.ndarray:
-    """The mean of ``values`` over the ``window_s`` before each sample (time-weighted by sample count)."""
+    """The mean of ``values`` over the samples in the ``window_s`` up to each sample (each sample counted once)."""
     total = np.concatenate([[0.0], np.cumsum(values)])
     start = np.searchsorted(time_s, time_s - window_s, side="left")
     stop = np.arange(1, len(values) + 1)
