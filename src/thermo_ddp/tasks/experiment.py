@@ -32,6 +32,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -160,10 +161,15 @@ class _Design:
     def pairs(self) -> int:
         return len(_pairs(self.thetas.shape[0]))
 
+    @functools.cached_property
+    def rest_c(self) -> np.ndarray:
+        """Every explanation's sensor at rest (the start): what the passive recordings already pin."""
+        return self.sensors(self.x0[None, :])[0]
+
     def own(self, scales) -> np.ndarray:
         """The problem's own parameters: ambient, limit, each pair's sign over its target (``scales``) and each
-        pair's sensor difference at rest (what the passive recordings already pin: not divergence)."""
-        rest = self.sensors(self.x0[None, :])[0]
+        pair's sensor difference at rest (:attr:`rest_c`: not divergence)."""
+        rest = self.rest_c
         return np.concatenate([[self.ambient_c, self.limit_c], scales, [rest[i] - rest[j] for i, j in
                                                                         _pairs(self.thetas.shape[0])]])
 
@@ -192,7 +198,7 @@ class _Design:
     def divergences(self, xs) -> np.ndarray:
         """(N+1, pairs) the difference of the sensor predictions of every pair of explanations, in K, each counted
         from its state at rest (the start, ``xs[0]``): a different resting temperature is no divergence."""
-        y = self.sensors(xs) - self.sensors(self.x0[None, :])[0]
+        y = self.sensors(xs) - self.rest_c
         return np.column_stack([y[:, i] - y[:, j] for i, j in _pairs(y.shape[1])])
 
 

@@ -79,9 +79,13 @@ def stretched_warm_start(plan: tuple[object, SolverResult], knots: int) -> WarmS
     """``plan``'s trajectories with its hold made ``knots`` long: everything after the hold moves with the hold's
     end, so the lowering starts where the probe's reference lowers (not the neighbour's solution as it is, whose
     lowering is off by the knots between them). Its multipliers are left (see :func:`boundary_warm_start`)."""
-    src, result = plan
-    end, shift = src.hold_knots[1], knots - (src.hold_knots[1] - src.hold_knots[0])
+    (end, shift), result = _hold_move(plan[0], knots), plan[1]
     return WarmStart(_moved(result.xs, end, shift), _moved(result.us, end, shift))
+
+
+def _hold_move(src, knots: int) -> tuple[int, int]:
+    """(the knot where ``src``'s hold ends, the knots it moves by) when that hold is made ``knots`` long."""
+    return src.hold_knots[1], knots - (src.hold_knots[1] - src.hold_knots[0])
 
 
 def boundary_warm_start(plan: tuple[object, SolverResult], knots: int) -> WarmStart:
@@ -91,9 +95,8 @@ def boundary_warm_start(plan: tuple[object, SolverResult], knots: int) -> WarmSt
     in 20 iterations at 84 °C and 33 at 140 °C against 46 and 57 from the trajectories alone; with the
     penalties kept, or from an infeasible neighbour, 200 iterations and no verdict (the solve is then capped:
     :data:`thermo_ddp.tasks.attempts.WARM_MULTIPLIER_ITERATIONS`)."""
-    src, result = plan
-    end, shift = src.hold_knots[1], knots - (src.hold_knots[1] - src.hold_knots[0])
-    m, warm = result.multipliers, stretched_warm_start(plan, knots)
+    (end, shift), m = _hold_move(plan[0], knots), plan[1].multipliers
+    warm = stretched_warm_start(plan, knots)
     if m.get("constraints") is None or m.get("penalty") is None:  # a solver without an augmented Lagrangian
         return warm
     rho = np.asarray(m["penalty"], dtype=float)
