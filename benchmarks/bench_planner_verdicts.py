@@ -9,6 +9,9 @@ about 4x the time). Counted, in benchmarks/results/planner_verdicts.json:
 - ``agree``: both reached a verdict, the same status, the same longest hold within one knot and, at the same
   hold, the same cost within 1e-3 (relative); ``agree_ipopt_one_knot_longer`` of them: IPOPT feasible one knot
   past DDP's longest hold (and not two: within the criterion, but DDP's certificate there was only local);
+  ``agree_ipopt_one_knot_shorter``: IPOPT infeasible at DDP's longest hold and feasible one knot shorter, where
+  DDP too fell short of the hold asked (within the criterion: the same feasibility, the longest holds a knot
+  apart; no cost is compared, IPOPT having no plan at DDP's hold);
 - ``disagree``: both reached a verdict and differ (listed in full);
 - ``failed_as_verdict``: a plan that states a verdict while its decisive solve did not reach one (must be 0);
 - ``ddp_failed`` / ``ipopt_failed``: plans ``failed`` (no verdict: said so, exit 1), ``tracebacks`` (must be 0),
@@ -92,10 +95,11 @@ def compare(ddp: dict, ipopt: dict, dt_s: float = 0.1) -> str:
         return "disagree"
     same_hold = abs(ddp["achieved_hold_s"] - ipopt["achieved_hold_s"]) <= dt_s + 1e-9
     at_same_hold = ddp["achieved_hold_s"] == ipopt["achieved_hold_s"] or "checks" in ipopt  # boundary: DDP's hold
-    same_cost = (not at_same_hold or ddp["status"] == "infeasible"
+    same_cost = (not at_same_hold or ddp["status"] == "infeasible" or ipopt["status"] == "one_knot_shorter"
                  or abs(ddp["cost"] - ipopt["cost"]) <= COST_RTOL * max(1.0, abs(ipopt["cost"])))
     same = ddp["status"] == ipopt["status"] or {ddp["status"], ipopt["status"]} <= {
-        "feasible", "infeasible_hold", "one_knot_longer"}
+        "feasible", "infeasible_hold", "one_knot_longer"} or (ddp["status"], ipopt["status"]) == (
+        "infeasible_hold", "one_knot_shorter")  # DDP held a knot more than IPOPT: the same if DDP fell short too
     return "agree" if same and same_hold and same_cost else "disagree"
 
 
@@ -133,6 +137,8 @@ def ipopt_at_boundary(request: dict, ddp: dict, cached: dict | None = None) -> d
             check(k)
         if checks.get(knots + 1, {}).get("verdict") == "feasible" and knots + 2 <= top:
             check(knots + 2)  # IPOPT holds a knot more: is its longest hold within one knot of DDP's?
+        if knots >= 1 and checks[knots]["verdict"] == "infeasible":
+            check(knots - 1)  # IPOPT cannot hold DDP's hold: is its longest hold within one knot of DDP's?
     except Exception:  # noqa: BLE001 - the count the benchmark exists for
         return {"outcome": "traceback", "message": traceback.format_exc(limit=3)}
     return _boundary_verdict(ddp, knots, checks, time.perf_counter() - start)
@@ -245,14 +251,16 @@ def _boundary_verdict(ddp: dict, knots: int, checks: dict, wall_s: float) -> dic
     checks = {int(k): v for k, v in checks.items()}
     if any(c["verdict"] is None for c in checks.values()):
         status = "failed"
-    elif knots >= 0 and checks[knots]["verdict"] != "feasible":
-        status = "infeasible" if knots == 0 else "shorter"  # IPOPT cannot hold what DDP held
+    elif knots >= 0 and checks[knots]["verdict"] != "feasible":  # IPOPT cannot hold what DDP held
+        status = "infeasible" if knots == 0 else (
+            "one_knot_shorter" if checks.get(knots - 1, {}).get("verdict") == "feasible" else "shorter")
     elif checks.get(knots + 1, {}).get("verdict") == "feasible":
         # IPOPT's longest hold is one knot longer than DDP's (within the criterion), or more
         status = "one_knot_longer" if checks.get(knots + 2, {}).get("verdict") != "feasible" else "longer"
     else:
         status = ddp["status"]
-    achieved = {ddp["status"]: ddp["achieved_hold_s"], "one_knot_longer": ddp["achieved_hold_s"] + 0.1}.get(status)
+    achieved = {ddp["status"]: ddp["achieved_hold_s"], "one_knot_longer": ddp["achieved_hold_s"] + 0.1,
+                "one_knot_shorter": ddp["achieved_hold_s"] - 0.1}.get(status)
     cost = checks[knots]["cost"] if knots >= 0 and knots in checks else float("nan")
     return {"outcome": "plan", "status": status, "achieved_hold_s": achieved, "cost": cost, "checks": checks,
             "solver_status": "converged" if status != "failed" else "failed", "wall_s": wall_s}
@@ -377,6 +385,8 @@ def _write(args, n, rows):
         "agree", "disagree", "ddp_failed", "ipopt_failed", "refused", "traceback", "failed_as_verdict")},
         "agree_ipopt_one_knot_longer": sum(1 for r in rows if r["comparison"] == "agree"
                                            and r["ipopt"].get("status") == "one_knot_longer"),
+        "agree_ipopt_one_knot_shorter": sum(1 for r in rows if r["comparison"] == "agree"
+                                            and r["ipopt"].get("status") == "one_knot_shorter"),
         "converged_ddp_verdicts": sum(1 for r in rows if r["comparison"] in ("agree", "disagree")),
         "disagree_certified": sum(1 for r in rows if r["comparison"] == "disagree" and r.get("certified")),
         "disagree_not_certified": sum(1 for r in rows if r["comparison"] == "disagree" and not r.get("certified")),
