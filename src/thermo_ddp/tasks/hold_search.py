@@ -6,13 +6,14 @@ temperatures, a little long), then from a thermal-only prediction (milliseconds)
 winding stays under the limit when the last plan's currents of the lift, the hold and the lowering are
 replayed with the hold stretched or cut (what the optimiser does on the lift, the hold band and the lowering). The
 prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
-does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
-on the same side twice the probes gallop (steps doubling); bisection takes over after
-:data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
-hold's plan stretched and its multipliers (:func:`boundary_warm_start`; solved again when it came from another
-start). The default 40 kg searches take 4 solves and 128 DDP iterations at 84 °C (the confirmation of the
-boundary 20 of them) and 3 solves and 141 iterations at 140 °C (156 and 186 with the confirmation from the
-trajectories alone; 6 and 4 solves by galloping and bisection; benchmarks/README.md).
+does when the limit binds, optimistic by about half the distance from the probe, see :func:`_next_guess`);
+from a feasible plan that does not reach the limit it is short. When it misses on the same side twice the
+probes gallop (steps doubling); bisection takes over after :data:`GUIDED_PROBES` probes. The infeasible verdict
+one knot past the longest hold is stated only from that hold's plan stretched and its multipliers
+(:func:`boundary_warm_start`; solved again when it came from another start). The default 40 kg searches take
+3 solves each: 97 DDP iterations at 84 °C (the confirmation of the boundary 20 of them) and 141 at 140 °C (4
+solves and 128 iterations at 84 °C with a 1-knot bias; 6 and 4 solves by galloping and bisection;
+benchmarks/README.md).
 """
 from __future__ import annotations
 
