@@ -283,5 +283,6 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         same_side = outcome.verdict == last and (outcome.feasible or len(search.probes) > 2)
         step = 2 * step if same_side else 1   # the same side again: gallop
         last = outcome.verdict
-        guess = _next_guess(lp, knots, outcome, lo, hi, step, first=len(search.probes) == 1)
+        # the first probe's bias is measured on plans (verdicts); a controller's real-time search keeps a knot
+        guess = _next_guess(lp, knots, outcome, lo, hi, step, first=stop_without_verdict and len(search.probes) == 1)
     return search.result(lo)
