@@ -81,7 +81,7 @@ def test_the_boundary_verdict_is_confirmed_from_the_longest_holds_plan(lift, mon
         return Outcome(plan, "feasible" if feasible else "infeasible", ())
 
     monkeypatch.setattr(hold_search, "_next_guess",
-                        lambda lp, knots, outcome, lo, hi, step: knots + 1 if outcome.feasible else 40)
+                        lambda lp, knots, outcome, lo, hi, step, first=False: knots + 1 if outcome.feasible else 40)
     search = hold_search.longest_feasible_hold(lift, solve, 42)
     assert search.knots == 42 and search.probes[43][1].verdict == "infeasible"
     assert sorted(search.probes) == [40, 41, 42, 43] and len(search.replaced) == 1  # 42 solved twice

@@ -47,8 +47,9 @@ class _KnotFunctions:
         L = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(mu, g) + ca.dot(lam_next, f)
         Lx, Lu = ca.gradient(L, x), ca.gradient(L, u)
         self.stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
-        # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input)
-        self.adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu], [Lx])
+        # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input), with the rest of
+        # the stage's figures from the same sweep (one pass over the knots instead of two)
+        self.adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu, xn], [Lx, Lu, g, f - xn])
         gN = F.terminal_constraint(x, p)
         LN = 0.5 * ca.sumsqr(F.terminal_residual(x, p)) + ca.dot(muN, gN)
         self.terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
@@ -79,12 +80,18 @@ class KKTEvaluator:
 
     def costates(self, xs, us, params, mu, muN) -> np.ndarray:
         """The exact adjoint (N+1, nx) of the trajectory with inequality multipliers mu (N, ng), muN (ngN)."""
+        return self._adjoint_sweep(xs, us, params, np.asarray(mu), muN)[0]
+
+    def _adjoint_sweep(self, xs, us, params, mu, muN):
+        """(costates (N+1, nx), Lu (N, nu), G (N, ng), gaps (N, nx)): the exact adjoint and the stage figures
+        along it, in one backward sweep."""
         N = len(us)
         _, adjoint = self._mapped(N)
         lamN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
         rev = slice(None, None, -1)
-        acc = np.asarray(adjoint(lamN, xs[:N][rev].T, us[rev].T, params[:N][rev].T, np.asarray(mu)[rev].T))
-        return np.vstack([acc.T[rev], lamN])
+        acc, Lu, G, C = (np.asarray(v).T[rev] for v in adjoint(lamN, xs[:N][rev].T, us[rev].T, params[:N][rev].T,
+                                                                mu[rev].T, xs[1:][rev].T))
+        return np.vstack([acc, lamN]), Lu, G, C
 
     def residuals(self, xs, us, params, mu, muN, x0, costates=None, bound_multipliers=None) -> dict[str, float]:
         """The KKT residuals at the trajectory from ``x0``; ``costates`` (N+1, nx) and ``bound_multipliers``
@@ -93,11 +100,13 @@ class KKTEvaluator:
         xs, us, params = (np.asarray(a, dtype=float) for a in (xs, us, params))
         mu = np.asarray(mu, dtype=float).reshape(len(us), pr.n_constraints)
         muN = np.asarray(muN, dtype=float).ravel()
-        if costates is None:
-            costates = self.costates(xs, us, params, mu, muN)
-        stage, _ = self._mapped(len(us))
-        Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
-                                                        xs[1:].T))
+        if costates is None:  # the exact adjoint: its x rows vanish (Lx_k = lam_k)
+            costates, Lu, G, C = self._adjoint_sweep(xs, us, params, mu, muN)
+            Lx = costates[:-1]
+        else:
+            stage, _ = self._mapped(len(us))
+            Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
+                                                            xs[1:].T))
         LxN, GN = (np.asarray(v).ravel() for v in self._terminal(xs[-1], params[-1], muN))
         lb, ub = np.broadcast_to(pr.u_lb, us.shape), np.broadcast_to(pr.u_ub, us.shape)
         z = _projected_bound_multipliers(Lu, us, lb, ub) if bound_multipliers is None else bound_multipliers

@@ -6,13 +6,14 @@ temperatures, a little long), then from a thermal-only prediction (milliseconds)
 winding stays under the limit when the last plan's currents of the lift, the hold and the lowering are
 replayed with the hold stretched or cut (what the optimiser does on the lift, the hold band and the lowering). The
 prediction from an infeasible plan near the boundary is within a knot or two (it replays what the optimiser
-does when the limit binds); from a feasible plan that does not reach the limit it is short. When it misses
-on the same side twice the probes gallop (steps doubling); bisection takes over after
-:data:`GUIDED_PROBES` probes. The infeasible verdict one knot past the longest hold is stated only from that
-hold's plan stretched and its multipliers (:func:`boundary_warm_start`; solved again when it came from another
-start). The default 40 kg searches take 4 solves and 128 DDP iterations at 84 °C (the confirmation of the
-boundary 20 of them) and 3 solves and 141 iterations at 140 °C (156 and 186 with the confirmation from the
-trajectories alone; 6 and 4 solves by galloping and bisection; benchmarks/README.md).
+does when the limit binds; the first probe's by about half its distance, see :func:`_next_guess`);
+from a feasible plan that does not reach the limit it is short. When it misses on the same side twice the
+probes gallop (steps doubling); bisection takes over after :data:`GUIDED_PROBES` probes. The infeasible verdict
+one knot past the longest hold is stated only from that hold's plan stretched and its multipliers
+(:func:`boundary_warm_start`; solved again when it came from another start). The default 40 kg searches take
+3 solves each: 97 DDP iterations at 84 °C (the confirmation of the boundary 20 of them) and 141 at 140 °C (4
+solves and 128 iterations at 84 °C with a 1-knot bias; 6 and 4 solves by galloping and bisection;
+benchmarks/README.md).
 """
 from __future__ import annotations
 
@@ -236,8 +237,9 @@ class _Search:
         return HoldSearch(lo, self.probes, failed, tuple(self.replaced))
 
 
-def _next_guess(lp, knots: int, outcome: Outcome, lo: int, hi: int, step: int) -> int:
-    """Where the next probe goes after ``outcome`` at ``knots``: the thermal replay's prediction."""
+def _next_guess(lp, knots: int, outcome: Outcome, lo: int, hi: int, step: int, first: bool = False) -> int:
+    """Where the next probe goes after ``outcome`` at ``knots`` (``first``: the search's first probe): the
+    thermal replay's prediction."""
     probe = lp.with_hold(knots * lp.settings.dt_s)
     predicted = predicted_hold_knots(lp, (probe, outcome.result))
     if outcome.feasible and not _at_limit(lp, outcome.result):
@@ -246,9 +248,12 @@ def _next_guess(lp, knots: int, outcome: Outcome, lo: int, hi: int, step: int) -
         predicted = max(predicted, _arrival_knots(lp, probe, outcome.result))
     if not outcome.feasible and predicted >= knots and not _thermal(probe, outcome.result):
         return 0  # the heat neither decides nor binds: a shorter hold will not help, try touching the goal
-    # the replay of an infeasible plan far from the boundary is a knot optimistic (its hold and lowering still
-    # give way a little)
-    bias = 1 if knots - predicted >= 2 else 0
+    # the replay of an infeasible plan d >= 2 knots past its prediction is a knot optimistic (its hold and
+    # lowering still give way); the first probe's (from the cold start, placed a little long) by about d / 2,
+    # rounded down: a probe short of the boundary costs more (the short replays of feasible plans gallop).
+    # Measured on 12 requests (20-60 kg, 70-140 °C, benchmarks/README.md)
+    d = knots - predicted
+    bias = 0 if d < 2 else max(1, d // 2) if first else 1
     return max(predicted, lo + step) if outcome.feasible else min(predicted - bias, hi - step)
 
 
@@ -278,5 +283,6 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
         same_side = outcome.verdict == last and (outcome.feasible or len(search.probes) > 2)
         step = 2 * step if same_side else 1   # the same side again: gallop
         last = outcome.verdict
-        guess = _next_guess(lp, knots, outcome, lo, hi, step)
+        # the first probe's bias is measured on plans (verdicts); a controller's real-time search keeps a knot
+        guess = _next_guess(lp, knots, outcome, lo, hi, step, first=stop_without_verdict and len(search.probes) == 1)
     return search.result(lo)
