@@ -75,6 +75,7 @@ def test_designed_experiment_settles_friction_heat_seen_at_one_speed():
     assert not before.final_fit.identifiable(FRICTION_KEYS[0])   # one speed: c1 and c2 not separable
     truth, design, rows, temps, after = designed_and_rediagnosed("friction_one_speed")
     assert design.targets == ("friction_heating",) and design.predicted_separation_k["friction_heating"] > 0
+    assert design.to_dict()["not_determinable"] == []   # the design predicts every value pinned: and it is
     check_settled(truth, design, rows, temps, after)
 
 
