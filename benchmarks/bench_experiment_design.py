@@ -30,7 +30,7 @@ Also issue 25's families (``truths.FAMILIES``: drive + friction heat seen only w
 speed, friction heat never excited, and a truth with nothing missing), summarised per family.
 
     python benchmarks/bench_experiment_design.py [--cases 12] [--first-case 0] [--family-seeds 1] [--workers 2]
-                                                 [--duration-s 3600]
+                                                 [--duration-s 3600] [--from-log LOG --wall-s S]
 """
 from __future__ import annotations
 
@@ -180,6 +180,19 @@ def summary(cases: list[dict]) -> dict:
     return out
 
 
+def run_cases(args) -> list[dict]:
+    """Every case of the request, each printed to stderr as it ends (a long run's progress)."""
+    from thermo_ddp.testing.testbed.truths import FAMILIES
+    jobs = [(f, k, args.duration_s) for f in FAMILIES for k in range(args.family_seeds)]
+    jobs += [(None, k, args.duration_s) for k in range(args.first_case, args.first_case + args.cases)]
+    cases = []
+    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+        for case in pool.imap(run_case, jobs, chunksize=1):
+            cases.append(case)
+            print(json.dumps(case), file=sys.stderr, flush=True)
+    return cases
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cases", type=int, default=12)
@@ -189,21 +202,23 @@ def main() -> None:
     parser.add_argument("--family-seeds", type=int, default=1, help="cases per family of issue 25 (the first: the "
                         "class truth of tests/test_experiment_design.py, the others randomised)")
     parser.add_argument("--duration-s", type=float, default=3600.0)
+    parser.add_argument("--from-log", help="summarise the cases a run printed (its stderr, one JSON line per case: a "
+                        "run stopped early) instead of running; with --wall-s, the wall time measured outside")
+    parser.add_argument("--wall-s", type=float)
     args = parser.parse_args()
     from thermo_ddp.testing.testbed.truths import FAMILIES
     start = time.perf_counter()
-    jobs = [(f, k, args.duration_s) for f in FAMILIES for k in range(args.family_seeds)]
-    jobs += [(None, k, args.duration_s) for k in range(args.first_case, args.first_case + args.cases)]
-    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
-        cases = []
-        for case in pool.imap(run_case, jobs, chunksize=1):   # each case as it ends (a long run's progress)
-            cases.append(case)
-            print(json.dumps(case), file=sys.stderr, flush=True)
+    if args.from_log:
+        with open(args.from_log) as log:
+            cases = [json.loads(line) for line in log if line.startswith("{")]
+    else:
+        cases = run_cases(args)
     payload = {"summary": summary([c for c in cases if c["family"] == "random"]),
                "families": {f: summary([c for c in cases if c["family"] == f]) for f in FAMILIES
                             if any(c["family"] == f for c in cases)},
                "cases": cases, "duration_s": args.duration_s, "workers": args.workers,
-               "wall_s": time.perf_counter() - start, "machine": machine()}
+               "wall_s": args.wall_s if args.from_log else time.perf_counter() - start, "machine": machine(),
+               "from_log": args.from_log}
     write("experiment_design" + (f"_from_{args.first_case}" if args.first_case else ""), payload)
     print(json.dumps({"random": payload["summary"], "families": payload["families"]}, indent=2))
 
