@@ -25,7 +25,7 @@ import numpy as np
 
 from .._config import require
 from ..diagnose.thermal import ThermalDiagnosis, ThermalDiagnosisSettings, diagnose_thermal
-from ..tasks.experiment import ExperimentDesign, ExperimentSettings, design_experiment
+from ..tasks.experiment import ExperimentDesign, ExperimentSettings, design_experiment, winding_rise_k_per_w
 from ..testing.testbed import PlantParameters, SimulatedRecording, programmed
 from ..testing.testbed.truths import ThreeNodeTruth, run_programme
 
@@ -85,6 +85,10 @@ def close_the_loop(recordings, truth: ThreeNodeTruth, *, rounds: int = 2, settin
     settings = settings or ExperimentSettings()
     recs, done, rng = list(recordings), [], np.random.default_rng(seed)
     diagnosis = diagnosis or diagnose_thermal(recs)
+    # every round guards the winding at least as the first did: a later fit's narrower interval of the winding
+    # node may be biased (case 90019: 92.9 °C under an 84 °C limit with the second round's own guard)
+    floor = max(winding_rise_k_per_w(diagnosis), settings.winding_rise_k_per_w) if diagnosis.final_fit else 0.0
+    settings = dataclasses.replace(settings, winding_rise_k_per_w=floor)
     left_s = settings.duration_s
     for k in range(rounds):
         design = _round_design(recs, settings, diagnosis, left_s, rounds - k if shared else 1)

@@ -74,13 +74,15 @@ _SRC = "design_experiment"
 
 
 @checked_settings(_SRC, duration_s=f"(0, {MAX_DURATION_S:g}]", dt_s="[1, 600]", sample_s="(0, 10]",
-                  acceleration_rad_s2="(0, inf)", margin_rad="[0, inf)", max_iterations="[1, inf)")
+                  acceleration_rad_s2="(0, inf)", margin_rad="[0, inf)", max_iterations="[1, inf)",
+                  winding_rise_k_per_w="[0, inf)")
 class ExperimentSettings:
     """``duration_s``: the longest experiment; ``limit_c``: the winding limit (None: the file's cut-off);
     ``dt_s``: knots of the control (current and speed held over each); ``sample_s``: rows of the programme;
     ``acceleration_rad_s2``: careful motion's reversal and stop acceleration; ``margin_rad``: kept inside the
     joint range; ``max_iterations``: DDP iterations per start; ``progress``: bar over the starts (None: only
-    on a terminal)."""
+    on a terminal); ``winding_rise_k_per_w``: the least winding-over-sensor resistance the limit is guarded with
+    (a sequential design keeps its first round's: :func:`winding_rise_k_per_w`)."""
 
     duration_s: float = 3600.0
     limit_c: float | None = None
@@ -90,6 +92,7 @@ class ExperimentSettings:
     margin_rad: float = 0.2
     max_iterations: int = 300
     progress: bool | None = None
+    winding_rise_k_per_w: float = 0.0
 
 
 
@@ -486,7 +489,7 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
     lo, hi, vmax = joint_bounds(params, settings.margin_rad)
     u_max = np.array([params.motor.current_peak_a, vmax])
     tic = time.perf_counter()
-    rise = winding_rise_k_per_w(diagnosis)
+    rise = max(winding_rise_k_per_w(diagnosis), settings.winding_rise_k_per_w)
     design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings, rise)
     starts, reach = _starts(design)
     keep = _distinct(design.thetas.shape[0], reach, design.sigma_c)
