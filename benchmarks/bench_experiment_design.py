@@ -7,6 +7,10 @@ undetermined (the design has a target).  Each case adds one experiment of ``--du
 recording, run on the same truth, and diagnoses both together:
 
 - ``designed``: ``design_experiment`` (the default settings, the elbow's 84 °C cut-off);
+- ``sequential``: two rounds sharing the duration (``studies.experiment_loop.close_the_loop``, ``shared``): the
+  first (half; all of it when nothing can be designed in half) designed for what the passive recording leaves
+  open, run, diagnosed; the second designed for what is still open in what is left (none when nothing is), run,
+  diagnosed with all;
 - ``protocol``: the seed report's: move back and forth at the passive session's speed at 3 A for half the
   time, then hold still at the same current (the same RMS current);
 - ``steps``: a plain current-step test at rest: 4 A and 0 A alternating every quarter.
@@ -17,13 +21,16 @@ set) AND every named parameter identifiable (95 % half-width <= 50 % of its valu
 parameter file's, the diagnosis's ``held``: the drive's i^2 loss, a drive node's ambient path, is not estimated,
 not judged); the mean relative error of the friction-heat and drive-idle values named where the truth has them;
 the peak true winding; the wall time of the design; the designs over the limit or the duration (must be 0).
+"Identifiable" cases: those whose one-round design lists nothing ``not_determinable`` (the package's own rule,
+stated before any run: a value of a named term that no start's design pins within +-50 % by its predicted
+covariance); the shares are also given over them, with the cases left out and why.
 Writes benchmarks/results/experiment_design.json.
 
 Also issue 25's families (``truths.FAMILIES``: drive + friction heat seen only while moving, friction heat at one
 speed, friction heat never excited, and a truth with nothing missing), summarised per family.
 
     python benchmarks/bench_experiment_design.py [--cases 12] [--first-case 0] [--family-seeds 1] [--workers 2]
-                                                 [--duration-s 3600]
+                                                 [--duration-s 3600] [--from-log LOG --wall-s S]
 """
 from __future__ import annotations
 
@@ -38,7 +45,7 @@ import numpy as np
 from _common import machine, write
 
 CASE_SEED, FAMILY_SEED = 90_000, 95_000
-METHODS = ("designed", "protocol", "steps")
+METHODS = ("designed", "sequential", "protocol", "steps")
 UNSEEN_SPEED_RAD_S = 1.5   # the protocol's speed when the passive session never moved
 LIMIT_C = 84.0             # the elbow file's cut-off: the designs' default limit
 
@@ -100,7 +107,7 @@ def run_case(job: tuple[str | None, int, float]) -> dict:
     settings = ExperimentSettings(duration_s=duration_s, limit_c=LIMIT_C, progress=False)
     design = design_experiment([rec], settings=settings, diagnosis=before)
     out |= {"design_status": design.status, "targets": list(design.targets), "design_s": time.perf_counter() - tic,
-            "duration_s": duration_s}
+            "duration_s": duration_s, "not_determinable": design.to_dict()["not_determinable"]}
     if not design.designed:
         return out
     moving = np.abs(rec.velocity[np.abs(rec.velocity) > 0.05])
@@ -114,7 +121,19 @@ def run_case(job: tuple[str | None, int, float]) -> dict:
         out[method] = judge(truth, diagnose_thermal([rec, run])) | {"peak_winding_c": float(temps[:, 0].max()),
                                                                   "duration_s": float(run.time_s[-1])}
     out["design_peak_winding_c"] = design.peak_winding_c
-    return out
+    return out | {"sequential": sequential(rec, truth, before, settings, seed, measurement)}
+
+
+def sequential(rec, truth, before, settings, seed: int, measurement: dict) -> dict:
+    """Two rounds of half the duration (``close_the_loop``), judged on its final diagnosis."""
+    from thermo_ddp.studies.experiment_loop import close_the_loop
+    loop = close_the_loop([rec], truth, rounds=2, settings=settings, seed=seed, diagnosis=before, shared=True,
+                          **measurement)
+    ran = [r for r in loop.rounds if r.true_peak_winding_c is not None]
+    return judge(truth, loop.final) | {"peak_winding_c": max((r.true_peak_winding_c for r in ran), default=None),
+                                       "duration_s": sum(r.design.duration_s for r in ran), "rounds": len(ran),
+                                       "round_designs": [{"status": r.design.status, "targets": list(r.design.targets)}
+                                                         for r in loop.rounds]}
 
 
 def targets_settled(case: dict, method: str) -> bool:
@@ -127,8 +146,18 @@ def targets_settled(case: dict, method: str) -> bool:
                                                                    & set(judged["loose"])) for t in case["targets"])
 
 
+def shares(done: list[dict], m: str) -> dict:
+    """The method's shares over the cases ``done`` (None: no case)."""
+    def share(values):
+        return float(np.mean(values)) if done else None
+    return {"settled_share": share([c[m]["settled"] for c in done]),
+            "targets_settled_share": share([targets_settled(c, m) for c in done]),
+            "exact_share": share([c[m]["exact"] for c in done])}
+
+
 def summary(cases: list[dict]) -> dict:
     done = [c for c in cases if "designed" in c]
+    identifiable = [c for c in done if not c["not_determinable"]]
     out = {"cases_drawn": len(cases), "cases_with_targets": len(done),
            "nothing_missing_named_nothing": [c["design_status"] == "nothing_undetermined" and not c["named_before"]
                                              for c in cases if c["family"] == "nothing_missing"],
@@ -136,16 +165,32 @@ def summary(cases: list[dict]) -> dict:
                                for s in sorted({c["design_status"] for c in cases})}}
     for m in METHODS:
         errors = [e for c in done for e in c[m]["errors"]]
-        out[m] = {"settled_share": float(np.mean([c[m]["settled"] for c in done])) if done else None,
-                  "targets_settled_share": float(np.mean([targets_settled(c, m) for c in done])) if done else None,
-                  "exact_share": float(np.mean([c[m]["exact"] for c in done])) if done else None,
-                  "mean_parameter_error": float(np.mean(errors)) if errors else None,
-                  "max_peak_winding_c": max((c[m]["peak_winding_c"] for c in done), default=None)}
+        out[m] = shares(done, m) | {"identifiable": shares(identifiable, m),
+                                    "mean_parameter_error": float(np.mean(errors)) if errors else None,
+                                    "max_peak_winding_c": max((c[m]["peak_winding_c"] for c in done
+                                                               if c[m]["peak_winding_c"] is not None), default=None)}
+    out["identifiable_cases"] = len(identifiable)
+    out["not_identifiable"] = {c["seed"]: [u["key"] for u in c["not_determinable"]] for c in done
+                               if c["not_determinable"]}
     out["median_design_s"] = float(np.median([c["design_s"] for c in done])) if done else None
     # safety: the truth's winding over the limit, or a designed run longer than requested (both must be 0)
-    out["designed_over_limit"] = sum(c["designed"]["peak_winding_c"] > LIMIT_C for c in done)
-    out["designed_over_duration"] = sum(c["designed"]["duration_s"] > c["duration_s"] for c in done)
+    for m in ("designed", "sequential"):
+        out[f"{m}_over_limit"] = sum((c[m]["peak_winding_c"] or -np.inf) > LIMIT_C for c in done)
+        out[f"{m}_over_duration"] = sum(c[m]["duration_s"] > c["duration_s"] for c in done)
     return out
+
+
+def run_cases(args) -> list[dict]:
+    """Every case of the request, each printed to stderr as it ends (a long run's progress)."""
+    from thermo_ddp.testing.testbed.truths import FAMILIES
+    jobs = [(f, k, args.duration_s) for f in FAMILIES for k in range(args.family_seeds)]
+    jobs += [(None, k, args.duration_s) for k in range(args.first_case, args.first_case + args.cases)]
+    cases = []
+    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
+        for case in pool.imap(run_case, jobs, chunksize=1):
+            cases.append(case)
+            print(json.dumps(case), file=sys.stderr, flush=True)
+    return cases
 
 
 def main() -> None:
@@ -157,21 +202,23 @@ def main() -> None:
     parser.add_argument("--family-seeds", type=int, default=1, help="cases per family of issue 25 (the first: the "
                         "class truth of tests/test_experiment_design.py, the others randomised)")
     parser.add_argument("--duration-s", type=float, default=3600.0)
+    parser.add_argument("--from-log", help="summarise the cases a run printed (its stderr, one JSON line per case: a "
+                        "run stopped early) instead of running; with --wall-s, the wall time measured outside")
+    parser.add_argument("--wall-s", type=float)
     args = parser.parse_args()
     from thermo_ddp.testing.testbed.truths import FAMILIES
     start = time.perf_counter()
-    jobs = [(f, k, args.duration_s) for f in FAMILIES for k in range(args.family_seeds)]
-    jobs += [(None, k, args.duration_s) for k in range(args.first_case, args.first_case + args.cases)]
-    with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
-        cases = []
-        for case in pool.imap(run_case, jobs, chunksize=1):   # each case as it ends (a long run's progress)
-            cases.append(case)
-            print(json.dumps(case), file=sys.stderr, flush=True)
+    if args.from_log:
+        with open(args.from_log) as log:
+            cases = [json.loads(line) for line in log if line.startswith("{")]
+    else:
+        cases = run_cases(args)
     payload = {"summary": summary([c for c in cases if c["family"] == "random"]),
                "families": {f: summary([c for c in cases if c["family"] == f]) for f in FAMILIES
                             if any(c["family"] == f for c in cases)},
                "cases": cases, "duration_s": args.duration_s, "workers": args.workers,
-               "wall_s": time.perf_counter() - start, "machine": machine()}
+               "wall_s": args.wall_s if args.from_log else time.perf_counter() - start, "machine": machine(),
+               "from_log": args.from_log}
     write("experiment_design" + (f"_from_{args.first_case}" if args.first_case else ""), payload)
     print(json.dumps({"random": payload["summary"], "families": payload["families"]}, indent=2))
 

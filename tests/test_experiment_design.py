@@ -75,6 +75,7 @@ def test_designed_experiment_settles_friction_heat_seen_at_one_speed():
     assert not before.final_fit.identifiable(FRICTION_KEYS[0])   # one speed: c1 and c2 not separable
     truth, design, rows, temps, after = designed_and_rediagnosed("friction_one_speed")
     assert design.targets == ("friction_heating",) and design.predicted_separation_k["friction_heating"] > 0
+    assert design.to_dict()["not_determinable"] == []   # the design predicts every value pinned: and it is
     check_settled(truth, design, rows, temps, after)
 
 
@@ -128,6 +129,44 @@ def test_a_resting_temperature_apart_is_no_divergence():
     assert np.abs(design.divergences(design.rollout(rest))).max() < 1e-9
     loaded = np.column_stack([np.full(design.mm.horizon, 3.0), np.zeros(design.mm.horizon)])
     assert 0 < np.abs(design.divergences(design.rollout(loaded))).max() < 0.1 * offset
+
+
+def test_predicted_half_widths_are_the_cramer_rao_bound_and_a_blind_value_is_unbounded():
+    """half_widths: Z95 sqrt(diag((J'J)^-1)) of the full least-squares problem (values and each segment's offset,
+    numpy's inverse as the oracle); a value no row sees is unbounded."""
+    from thermo_ddp.identify.fit_report import Z95
+    from thermo_ddp.tasks.experiment_information import half_widths
+    rng = np.random.default_rng(0)
+    blocks = [rng.normal(size=(40, 3)), rng.normal(size=(30, 3))]   # 2 values + the segment's offset
+    j = np.zeros((70, 4))
+    j[:40, :2], j[:40, 2], j[40:, :2], j[40:, 3] = blocks[0][:, :2], blocks[0][:, 2], blocks[1][:, :2], blocks[1][:, 2]
+    oracle = Z95 * np.sqrt(np.diag(np.linalg.inv(j.T @ j))[:2])
+    assert half_widths(blocks) == pytest.approx(oracle, rel=1e-9)
+    blind = [np.column_stack([b[:, :1], np.zeros(len(b)), b[:, 2:]]) for b in blocks]
+    widths = half_widths(blind)
+    assert np.isfinite(widths[0]) and np.isinf(widths[1])
+
+
+def test_a_value_no_start_pins_is_listed_not_determinable():
+    """undeterminable: a named value whose predicted half-width exceeds 50 % on every start's design is listed (with
+    the smallest); one start that pins it within 50 % is enough to demand it."""
+    from thermo_ddp.identify.thermal import ThermalModel, start_values
+    from thermo_ddp.tasks.experiment_information import undeterminable
+    from thermo_ddp.tasks.experiment_rivals import Explanations, Rival, Target
+    params = load_joint_parameters(None)
+    terms = ("drive_heating",)
+    values = start_values(params, terms)
+    reference = Rival("reference", terms, values)
+    warmer = Rival("warmer", terms, values | {"drive_idle_w": values["drive_idle_w"] * 1.5})
+    model = ThermalModel(params, terms, {"drive_loss_w_per_a2": values["drive_loss_w_per_a2"]})
+    expl = Explanations(reference, (Target("drive_heating", "test", (warmer,)),), (), model)
+    idle = list(model.keys).index("drive_idle_w")
+    loose, tight = np.full(len(model.keys), 0.1), np.full(len(model.keys), 0.1)
+    loose[idle], tight[idle] = 0.9, 0.3
+    listed = undeterminable(expl, [loose, 2 * loose])
+    assert [(u["term"], u["key"]) for u in listed] == [("drive_heating", "drive_idle_w")]
+    assert listed[0]["predicted_half_width"] == pytest.approx(0.9)
+    assert undeterminable(expl, [loose, tight]) == () and undeterminable(expl, []) == ()
 
 
 def test_a_truth_with_nothing_missing_names_nothing():

@@ -25,7 +25,10 @@
    its other values and every segment's initial offset nuisances.  Discrimination plans, information chooses:
    telling the explanations apart does not by itself pin each value down (two speeds for a linear and a
    quadratic friction heat), and the passive recordings already hold part of the information.
-6. The programme (``time_s``, ``current_a``, ``position``, ``velocity``) moves the joint back and forth inside
+6. Before any run, the design lists as ``not_determinable`` the values of the named terms and the targets that no
+   start's design pins within +-50 % by their predicted covariance
+   (:func:`~thermo_ddp.tasks.experiment_information.undeterminable`): not demanded of this experiment.
+7. The programme (``time_s``, ``current_a``, ``position``, ``velocity``) moves the joint back and forth inside
    its range at each knot's speed with a bounded acceleration (careful motion: reversals and the final stop
    at ``acceleration_rad_s2``), the current held per knot.
 """
@@ -51,6 +54,7 @@ from ..model.arm import ArmSettings
 from ..multi_model import MultiModelProblem
 from ..ocp import Constraint, Cost, KnotParameters
 from ..solvers import DDPSettings, DDPSolver, WarmStart
+from .experiment_information import half_widths, information, log_det, undeterminable
 from .experiment_rivals import Explanations, explanations
 from .experiment_motion import PROGRAMME_COLUMNS, joint_bounds, plot_experiment, programme
 from .limits import check_idle_below_limits, joint_limit_c
@@ -70,13 +74,15 @@ _SRC = "design_experiment"
 
 
 @checked_settings(_SRC, duration_s=f"(0, {MAX_DURATION_S:g}]", dt_s="[1, 600]", sample_s="(0, 10]",
-                  acceleration_rad_s2="(0, inf)", margin_rad="[0, inf)", max_iterations="[1, inf)")
+                  acceleration_rad_s2="(0, inf)", margin_rad="[0, inf)", max_iterations="[1, inf)",
+                  winding_rise_k_per_w="[0, inf)")
 class ExperimentSettings:
     """``duration_s``: the longest experiment; ``limit_c``: the winding limit (None: the file's cut-off);
     ``dt_s``: knots of the control (current and speed held over each); ``sample_s``: rows of the programme;
     ``acceleration_rad_s2``: careful motion's reversal and stop acceleration; ``margin_rad``: kept inside the
     joint range; ``max_iterations``: DDP iterations per start; ``progress``: bar over the starts (None: only
-    on a terminal)."""
+    on a terminal); ``winding_rise_k_per_w``: the least winding-over-sensor resistance the limit is guarded with
+    (a sequential design keeps its first round's: :func:`winding_rise_k_per_w`)."""
 
     duration_s: float = 3600.0
     limit_c: float | None = None
@@ -86,6 +92,7 @@ class ExperimentSettings:
     margin_rad: float = 0.2
     max_iterations: int = 300
     progress: bool | None = None
+    winding_rise_k_per_w: float = 0.0
 
 
 
@@ -291,27 +298,6 @@ def _sensitivities(design: _Design, grid: ThermalGrid, weight: float) -> np.ndar
     return np.sqrt(weight) * sens * scale / design.sigma_c
 
 
-def _information(blocks: list[np.ndarray], wanted: np.ndarray) -> np.ndarray:
-    """The Fisher information of the ``wanted`` parameters (a mask) from every segment's sensitivities, the other
-    parameters and each segment's initial offset nuisances (Schur complement: D_s-optimality)."""
-    q = blocks[0].shape[1] - 1
-    j = np.zeros((sum(b.shape[0] for b in blocks), q + len(blocks)))
-    row = 0
-    for k, b in enumerate(blocks):
-        j[row:row + b.shape[0], :q], j[row:row + b.shape[0], q + k] = b[:, :q], b[:, q]
-        row += b.shape[0]
-    keep = np.r_[wanted, np.zeros(len(blocks), bool)]
-    m = j.T @ j
-    a, b, c = m[np.ix_(keep, keep)], m[np.ix_(keep, ~keep)], m[np.ix_(~keep, ~keep)]
-    return a - b @ np.linalg.pinv(c) @ b.T
-
-
-def _log_det(information: np.ndarray) -> float:
-    """D-criterion: log det of the relative information (a floor keeps an unidentifiable direction finite)."""
-    eig = np.linalg.eigvalsh(0.5 * (information + information.T))
-    return float(np.sum(np.log(np.maximum(eig, 1e-9))))
-
-
 @dataclasses.dataclass(frozen=True)
 class _Solved:
     family: str
@@ -321,6 +307,7 @@ class _Solved:
     score: float     # mean over the pairs of log(RMS divergence / sensor noise) (-inf: violates a limit)
     message: str
     information: float = -math.inf   # D-criterion with the passive recordings (what picks the design)
+    half_widths: np.ndarray | None = None   # predicted relative 95 % half-width of every free value (None: no design)
 
 
 def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSettings, targets,
@@ -337,9 +324,9 @@ def _solve(design: _Design, family: str, us0: np.ndarray, settings: ExperimentSe
     rms = np.sqrt(np.mean(design.divergences(xs) ** 2, axis=0))
     score = float(np.mean(np.log(np.maximum(rms / design.sigma_c, 1e-12))))
     blocks = passive + [_sensitivities(design, _knot_grid(design, us), design.dt_s / GRID_S)]
-    info = _log_det(_information(blocks, design.expl.target_keys()))
+    info = log_det(information(blocks, design.expl.target_keys()))
     log.info("start %s: %s; divergence %.3g, information %.3g", family, result.message, score, info)
-    return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}", info)
+    return _Solved(family, result.success, us, xs, score, f"{family}: {result.message}", info, half_widths(blocks))
 
 
 def _over(design: _Design, xs, us) -> float:
@@ -370,6 +357,7 @@ class ExperimentDesign:
     targets: tuple[str, ...] = ()
     predicted_separation_k: dict = dataclasses.field(default_factory=dict)
     untargeted: tuple[dict, ...] = ()
+    undeterminable: tuple[dict, ...] = ()
     labels: tuple[str, ...] = ()
     time_s: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     current_a: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
@@ -403,7 +391,7 @@ class ExperimentDesign:
         return {"success": self.success, "status": self.status, "message": self.message, "targets": list(self.targets),
                 "duration_s": self.duration_s, "peak_winding_c": self.peak_winding_c, "limit_c": self.limit_c,
                 "predicted_separation_k": dict(self.predicted_separation_k), "explanations": list(self.labels),
-                "not_targeted": list(self.untargeted), "starts": dict(self.starts), "solve_s": self.solve_s}
+                "not_targeted": list(self.untargeted), "not_determinable": list(self.undeterminable), "starts": dict(self.starts), "solve_s": self.solve_s}
 
     def report(self) -> str:
         lines = [f"design-experiment: {self.status}: {self.message}"]
@@ -414,6 +402,7 @@ class ExperimentDesign:
             lines += [f"  {t}: the explanations' sensor predictions differ by {k:.2f} K (RMS, weakest rival)"
                       for t, k in self.predicted_separation_k.items()]
         lines += [f"  not targeted: {u['term']}: {u['reason']}" for u in self.untargeted]
+        lines += [f"  not determinable: {u['key']} ({u['term']}): {u['reason']}" for u in self.undeterminable]
         return "\n".join(lines)
 
     def plot(self, path) -> None:
@@ -500,7 +489,7 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
     lo, hi, vmax = joint_bounds(params, settings.margin_rad)
     u_max = np.array([params.motor.current_peak_a, vmax])
     tic = time.perf_counter()
-    rise = winding_rise_k_per_w(diagnosis)
+    rise = max(winding_rise_k_per_w(diagnosis), settings.winding_rise_k_per_w)
     design = _build(expl, diagnosis.noise.total_c, limit_c, _ambient(diagnosis), u_max, settings, rise)
     starts, reach = _starts(design)
     keep = _distinct(design.thetas.shape[0], reach, design.sigma_c)
@@ -529,7 +518,9 @@ def _design(expl, diagnosis, params, limit_c, settings) -> ExperimentDesign:
                                                   "best iterate, its limits checked by simulation")
     message = (f"settles {', '.join(common['targets'])} in {settings.duration_s / 60:.0f} min "
                f"(best start: {best.family}, {optimum}; {len(expl.rivals)} explanations)")
+    widths = [s.half_widths for s in solved if math.isfinite(s.score)]
     return ExperimentDesign(True, "designed", message, settings, limit_c,
+                            undeterminable=undeterminable(expl, widths, diagnosis.final_fit.stderr_inflation),
                             predicted_separation_k=_separations(design, best.xs),
                             time_s=np.arange(design.mm.horizon + 1) * design.dt_s, current_a=best.us[:, 0],
                             speed_rad_s=best.us[:, 1], sensor_c=design.sensors(best.xs),
