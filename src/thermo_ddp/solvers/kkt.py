@@ -13,9 +13,13 @@ opposite sign), inequality multipliers mu_k >= 0 (g <= 0) and control-bound mult
 - complementarity: the largest |mu g| and |z (u - bound)|, and any wrong-signed multiplier |min(mu, 0)|.
 
 A solver that has no costates (or no bound multipliers) of its own leaves them out: the costates are then
-the exact adjoint of its trajectory and multipliers (lam_N = dL_N/dx_N, lam_k = dL_k/dx_k, so the x rows
-vanish: the reduced gradient, as DDP's convergence test measures it), and the bound multipliers the
-projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhere).
+the least-squares multipliers of the dynamics at its trajectory and inequality multipliers (the lam_1..lam_N
+that minimise the Euclidean norm of every stationarity row; the controls at a bound left out of the fit), and
+the bound multipliers the projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhere).
+One sparse solve of the block-tridiagonal normal equations (blocks of nx), not a recursion: the exact adjoint
+lam_k = dL_k/dx_k propagated backwards through A_k' grows without bound on a long horizon whose
+linearisation is unstable backwards (measured 9.4e17 on a converged 40 kg lift), while the least-squares
+residual stays at the size of the reduced gradient |Qu| that DDP's convergence test measures.
 """
 from __future__ import annotations
 
@@ -23,6 +27,8 @@ import weakref
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 KKT_KEYS = ("stationarity", "primal", "complementarity")
 BOUND_TOL = 1e-9  # a control this close to its bound is at it (for the projected bound multipliers)
@@ -47,8 +53,9 @@ class _KnotFunctions:
         L = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(mu, g) + ca.dot(lam_next, f)
         Lx, Lu = ca.gradient(L, x), ca.gradient(L, u)
         self.stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
-        # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input)
-        self.adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu], [Lx])
+        # the stationarity rows are affine in lam_next: [Lx; Lu] = [Lx; Lu](lam_next = 0) + [A'; B'] lam_next
+        # (column-major vec of A, B: the row-major A', B')
+        self.jacobians = ca.Function("kkt_jacobians", [x, u, p], [ca.vec(ca.jacobian(f, x)), ca.vec(ca.jacobian(f, u))])
         gN = F.terminal_constraint(x, p)
         LN = 0.5 * ca.sumsqr(F.terminal_residual(x, p)) + ca.dot(muN, gN)
         self.terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
@@ -69,22 +76,30 @@ class KKTEvaluator:
         if knots is None:
             knots = _KNOTS[problem.functions] = _KnotFunctions(problem)
         self._knots = knots
-        self._stage, self._adjoint, self._terminal = knots.stage, knots.adjoint, knots.terminal
+        self._stage, self._terminal = knots.stage, knots.terminal
         self._maps = knots.maps
 
     def _mapped(self, N: int):
         if N not in self._maps:
-            self._maps[N] = (self._stage.map(N), self._adjoint.mapaccum(N))
+            self._maps[N] = (self._stage.map(N), self._knots.jacobians.map(N))
         return self._maps[N]
 
     def costates(self, xs, us, params, mu, muN) -> np.ndarray:
-        """The exact adjoint (N+1, nx) of the trajectory with inequality multipliers mu (N, ng), muN (ngN)."""
-        N = len(us)
-        _, adjoint = self._mapped(N)
-        lamN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
-        rev = slice(None, None, -1)
-        acc = np.asarray(adjoint(lamN, xs[:N][rev].T, us[rev].T, params[:N][rev].T, np.asarray(mu)[rev].T))
-        return np.vstack([acc.T[rev], lamN])
+        """The least-squares multipliers of the dynamics (N+1, nx; row 0 unused: x_0 is fixed) at the trajectory
+        with inequality multipliers mu (N, ng), muN (ngN): argmin over lam_1..lam_N of the stationarity rows'
+        Euclidean norm, the rows of controls at a bound left out."""
+        pr, N = self.problem, len(us)
+        nx, nu = pr.nx, pr.nu
+        stage, jacobians = self._mapped(N)
+        zero = np.zeros((nx, N))
+        Lx, Lu = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, zero, xs[1:].T)[:2])
+        At, Bt = (np.asarray(v).T.reshape(N, n, nx) for v, n in zip(jacobians(xs[:-1].T, us.T, params[:-1].T),
+                                                                    (nx, nu)))
+        LxN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
+        free = ~_at_bound(us, pr.u_lb, pr.u_ub)
+        M, b = _stationarity_system(At, Bt, free, np.concatenate([(Lu * free).ravel(), Lx[1:].ravel(), LxN]))
+        lam = spla.spsolve((M.T @ M).tocsc(), -(M.T @ b))
+        return np.vstack([np.zeros(nx), np.asarray(lam).reshape(N, nx)])
 
     def residuals(self, xs, us, params, mu, muN, x0, costates=None, bound_multipliers=None) -> dict[str, float]:
         """The KKT residuals at the trajectory from ``x0``; ``costates`` (N+1, nx) and ``bound_multipliers``
@@ -108,6 +123,25 @@ class KKTEvaluator:
                 np.abs(z_lo * np.where(np.isfinite(lb), us - lb, 0.0)),
                 np.abs(z_up * np.where(np.isfinite(ub), ub - us, 0.0))]
         return {"stationarity": _largest(stat), "primal": _largest(primal), "complementarity": _largest(comp)}
+
+
+def _at_bound(us, lb, ub) -> np.ndarray:
+    """(N, nu): the controls within :data:`BOUND_TOL` of a bound."""
+    lb, ub = np.broadcast_to(lb, us.shape), np.broadcast_to(ub, us.shape)
+    return (us <= lb + BOUND_TOL) | (us >= ub - BOUND_TOL)
+
+
+def _stationarity_system(At, Bt, free, b):
+    """The stationarity rows b + M lam (lam = [lam_1; ..; lam_N]): the controls' rows B_k' lam_{k+1} (zero
+    where a control is at a bound: its multiplier takes the row), then the states' rows A_k' lam_{k+1} - lam_k
+    (k = 1..N-1) and -lam_N."""
+    N, nu, nx = Bt.shape
+    eye = sp.identity(nx, format="csr")
+    u_rows = sp.block_diag([sp.csr_matrix(Bt[k] * free[k][:, None]) for k in range(N)], format="csr")
+    x_rows = sp.block_diag([-eye] * N, format="lil")
+    for k in range(1, N):
+        x_rows[(k - 1) * nx:k * nx, k * nx:(k + 1) * nx] = At[k]
+    return sp.vstack([u_rows, x_rows.tocsr()], format="csr"), b
 
 
 def _projected_bound_multipliers(Lu, us, lb, ub):
