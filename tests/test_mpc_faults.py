@@ -174,8 +174,8 @@ def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     """Careful motion in the planner (on by default) on the default plant, 15 % hotter than planned: its
-    one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight, stop_weight), the winding limit binds
-    from x_1 on (the window switches it off at x_0), so a measured speed against the phase's direction or near the stop does not make re-solves
+    one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight, stop_weight), the
+    winding limit binds from x_1 on (the window switches it off at x_0), so a measured speed against the phase's direction or near the stop does not make re-solves
     infeasible (16 of 165 periods fell back with the careful rows hard on x_0). The true winding stays under the
     limit; the executed approach to the stop is slow, the arm at rest at the end."""
     from thermo_ddp.tasks.limits import joint_range_rad
