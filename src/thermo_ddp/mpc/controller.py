@@ -232,11 +232,10 @@ class RecedingHorizonController:
             layout.assign(window, "ambient_c", self.ambient_c)
         return window
 
-    def planning_state(self, x_est: np.ndarray, tightening_c: float | None = None) -> np.ndarray:
-        """The state the planner starts from: the estimate with every thermal node raised by ``tightening_c``
-        (default: the controller's)."""
+    def planning_state(self, x_est: np.ndarray) -> np.ndarray:
+        """The state the planner starts from: the estimate with every thermal node raised by ``tightening_c``."""
         x = np.array(x_est, dtype=float)
-        x[self._thermal] += self.tightening_c if tightening_c is None else tightening_c
+        x[self._thermal] += self.tightening_c
         return x
 
     def _acceptable(self, result: SolverResult, deadline: bool = True) -> bool:
@@ -291,13 +290,7 @@ class RecedingHorizonController:
 
     def step(self, x_est: np.ndarray) -> ControlStep:
         """Advance one knot and re-solve from ``x_est`` (raised by ``tightening_c``), warm-started from the
-        shifted plan. A re-solve that stays unacceptable once the hold cannot be shortened (the lowering, or a hold
-        already cut to now) is tried once more from the estimate itself (``tightening_spent``): the uncertainty
-        back-off is spent on a braked lowering before the fallback, whose derated current cannot hold the arm.
-        Measured on the nominal sweep's seed 634801725 (winding estimated 83.3 °C with its 2 sigma as the lowering
-        starts, 84 °C limit): without it the re-solves were locally infeasible, the derated fallback let the arm
-        fall 0.31 rad past the elbow's stop. A failed or late solve falls back to the previous plan with feedback
-        (derated)."""
+        shifted plan; a failed or late solve falls back to the previous plan with feedback (derated)."""
         if self.plan is None:
             raise RuntimeError("call start() before step()")
         x_est = self.planning_state(x_est)
@@ -313,10 +306,6 @@ class RecedingHorizonController:
             status = "hold_shortened"
         t = self.k * self.lp.settings.dt_s
         events = ["hold_shortened"] if status == "hold_shortened" else []
-        if not self._acceptable(result) and self.tightening_c > 0 and not self._late(sum(r.solve_s for r in results)):
-            x_est = self.planning_state(x_est, -self.tightening_c)  # the estimate itself (see the docstring)
-            result = self.solver.solve(x_est, self.reachable_limit(self.window(), x_est, warm), warm)
-            results, events = results + [result], events + ["tightening_spent"]
         if self._acceptable(result) and not self._late(sum(r.solve_s for r in results)):
             if self.robust is not None and self.robust.due(self.k):  # the set's review (mpc.robust)
                 result, more, event = self.robust.review(self, x_est, result)
