@@ -71,16 +71,13 @@ def test_the_set_narrows_to_the_observers_interval(controllers):
 
 
 def test_closed_loop_on_a_hot_plant_needs_no_fallback():
-    """The sweep's hot run: the nominal hold needs a rescue at the lowering (the fallback plan, or since the
-    back-off may be spent on a braked lowering, ``tightening_spent``); the robust one needs neither, and the true
+    """The sweep's hot run: the nominal hold needs the fallback plan; the robust one does not, and the true
     winding stays under the limit."""
     d = draw(run_seeds(0, HOT_RUN + 1)[HOT_RUN])
     runs = {robust: run_closed_loop(MPCSettings.from_options(**_controller(False, not robust), **d),
                                     observer=OBSERVER, progress=False) for robust in (True, False)}
-    rescues = {"fallback_plan", "tightening_spent"}
-    assert rescues & set(runs[False].event_counts()), runs[False].message
+    assert runs[False].step_status.count("fallback") > 0
     r = runs[True]
     assert r.step_status.count("fallback") == 0 and r.peak_winding_c < r.limit_c and not r.cutoff_tripped
     events = r.event_counts()
-    assert not rescues & set(events) and r.success, r.message
     assert "robust_cut" in events and "robust_extend" in events  # cut at the start, lengthened as it learned
