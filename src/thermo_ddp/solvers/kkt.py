@@ -136,12 +136,15 @@ def _stationarity_system(At, Bt, free, b):
     where a control is at a bound: its multiplier takes the row), then the states' rows A_k' lam_{k+1} - lam_k
     (k = 1..N-1) and -lam_N."""
     N, nu, nx = Bt.shape
-    eye = sp.identity(nx, format="csr")
-    u_rows = sp.block_diag([sp.csr_matrix(Bt[k] * free[k][:, None]) for k in range(N)], format="csr")
-    x_rows = sp.block_diag([-eye] * N, format="lil")
-    for k in range(1, N):
-        x_rows[(k - 1) * nx:k * nx, k * nx:(k + 1) * nx] = At[k]
-    return sp.vstack([u_rows, x_rows.tocsr()], format="csr"), b
+    k, i, j = np.indices((N, nu, nx))
+    u_rows, u_cols, u_vals = k * nu + i, k * nx + j, Bt * free[:, :, None]
+    k, i, j = np.indices((N - 1, nx, nx))
+    a_rows, a_cols = N * nu + k * nx + i, (k + 1) * nx + j
+    diag = np.arange(N * nx)
+    rows = np.concatenate([u_rows.ravel(), a_rows.ravel(), N * nu + diag])
+    cols = np.concatenate([u_cols.ravel(), a_cols.ravel(), diag])
+    vals = np.concatenate([u_vals.ravel(), At[1:].ravel(), -np.ones(N * nx)])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(N * (nu + nx), N * nx)), b
 
 
 def _projected_bound_multipliers(Lu, us, lb, ub):
