@@ -152,11 +152,8 @@ def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
     hold of the planner's model (the sweep's --nominal-plan): with the back-off band hard the plan shortens the
     hold further (measured: 7.0 s; soft 7.4 s). Both keep planning once the estimate passes the hard limit: the
     window's limit is raised to what the warm start reaches (``reachable_limit``; before it, the hard band fell
-    back in 43 periods, the soft one in 8; measured then 1 and 7, the soft band's at the lowering's stop). With
-    stop_approach's weight 1e5 (ControllerSettings.stop_weight) the soft band falls back 0 times and the hard one 29
-    and leaves the joint range by 0.81 rad (at weight 10: 1 fallback, in range; measured once each, load 11): a
-    known regression of the non-default hard band, not analysed, so only the soft band must stay in range. The
-    true winding limit holds for both. (With the sweep's robust hold both bands plan 4.7 s without a fallback: the set's margin
+    back in 43 periods, the soft one in 8; measured now 1 and 7, the soft band's at the lowering's stop). The
+    true limit holds. (With the sweep's robust hold both bands plan 4.7 s without a fallback: the set's margin
     keeps the winding out of the band.)"""
     from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER
 
@@ -171,8 +168,8 @@ def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
     hard, soft = results[0.0], results[1e4]
     fallbacks = {w: r.step_status.count("fallback") for w, r in results.items()}
     assert hard.hold_s[-1] < soft.hold_s[-1], (hard.message, soft.message)
-    assert fallbacks[1e4] <= 8, fallbacks
-    assert soft.success and all(r.margin_c > 0 and not r.cutoff_tripped for r in results.values())
+    assert max(fallbacks.values()) <= 8, fallbacks
+    assert all(r.success and r.margin_c > 0 for r in results.values())
 
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
@@ -199,12 +196,13 @@ def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     assert m.max_speed_near_stop_rad_s <= 0.3 and m.final_speed_rad_s <= 0.01 and m.inside_range
 
 
-def test_lowering_at_the_limit_stays_in_the_joint_range():
+def test_lowering_at_the_limit_stays_in_the_joint_range_with_a_stiff_stop_weight():
     """The nominal sweep's seed 742431198 (plant winding capacity -12 %, friction +28 %, 54 °C start): the winding
-    reaches the limit as the lowering starts. With stop_approach as cheap as one_way (weight 10, the code before)
-    the planner let the 40 kg arm fall to save braking heat, the re-solves failed and the derated fallback let it
-    run 0.36 rad past the elbow's stop (22 fallback periods). With stop_weight 1e5 it plans a braked lowering and
-    stays in range; the oracle is the model's URDF range, measured on the TRUE position."""
+    reaches the limit as the lowering starts. With stop_approach as cheap as one_way (stop_weight 10, the default)
+    the planner lets the 40 kg arm fall to save braking heat, the re-solves fail and the derated fallback lets it
+    run 0.36 rad past the elbow's stop (``range_excess_rad``, the TRUE position against the model's URDF range;
+    the message says so). With stop_weight 1e5 it plans a braked lowering and stays in range (not the default: it regresses
+    the hard back-off band and the identification loop's oracle row, benchmarks/README.md)."""
     from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER, draw
     from thermo_ddp.tasks.limits import joint_range_rad
 
@@ -214,7 +212,7 @@ def test_lowering_at_the_limit_stays_in_the_joint_range():
         results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
     lo, hi = (float(b[0]) for b in joint_range_rad(build_models(results[1e5].settings)[0]))
     cheap, braked = results[10.0], results[1e5]
-    assert cheap.status == "joint_range_exceeded" and not cheap.success
+    assert "left the joint range" in cheap.message and "left the joint range" not in results[1e5].message
     assert cheap.range_excess_rad.max() == pytest.approx(cheap.q_rad.max() - hi) and cheap.q_rad.max() > hi + 0.1
     assert braked.success and lo <= braked.q_rad.min() and braked.q_rad.max() <= hi, braked.report()
     assert braked.range_excess_rad.max() == 0 and braked.step_status.count("fallback") <= 3
