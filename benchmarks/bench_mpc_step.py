@@ -51,7 +51,8 @@ def controller_problem(limit_c: float, careful: bool, integrator: str):
     """The bench's lift as the controller transcribes it (no row on x_0, soft back-off, soft motion rows)."""
     lp = lift_problem(KNOTS, limit_c, careful_motion=careful, integrator=integrator)
     c = CONTROLLER.controller
-    problem = planner_ocp(lp.problem, CONTROLLER.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight)
+    problem = planner_ocp(lp.problem, CONTROLLER.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight,
+                          c.stop_weight)
     return dataclasses.replace(lp, problem=problem)
 
 

@@ -174,8 +174,8 @@ def test_soft_backoff_plans_a_longer_hold_through_a_hotter_plant():
 
 def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     """Careful motion in the planner (on by default) on the default plant, 15 % hotter than planned: its
-    one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight), the winding limit binds
-    from x_1 on (the window switches it off at x_0), so a measured speed against the phase's direction or near the stop does not make re-solves
+    one_way and stop_approach rows cost their excess (ControllerSettings.motion_weight, stop_weight), the
+    winding limit binds from x_1 on (the window switches it off at x_0), so a measured speed against the phase's direction or near the stop does not make re-solves
     infeasible (16 of 165 periods fell back with the careful rows hard on x_0). The true winding stays under the
     limit; the executed approach to the stop is slow, the arm at rest at the end."""
     from thermo_ddp.tasks.limits import joint_range_rad
@@ -187,10 +187,33 @@ def test_careful_motion_planner_keeps_planning_a_hotter_plant(nominal):
     names, costs = {c.name for c in lp.problem.constraints}, {c.name for c in lp.problem.costs}
     assert {"winding_limit", "hold_band"} <= names and not names & {"one_way", "stop_approach", "winding_limit_next"}
     assert {"one_way_penalty", "stop_approach_penalty", "winding_backoff"} <= costs
-    hard = planning_problem(r.settings.replace(motion_weight=0.0), build_models(r.settings)[0])
+    hard = planning_problem(r.settings.replace(motion_weight=0.0, stop_weight=0.0), build_models(r.settings)[0])
     assert {"one_way_next", "stop_approach_next"} <= {c.name for c in hard.problem.constraints}
     assert_safe(r)
     assert r.step_status.count("fallback") <= 0.03 * len(r.step_status), r.message
     lo, hi = (b[0] for b in joint_range_rad(lp.model))
     m = MotionQuality.of(r.time_s, r.q_rad, r.v_rad_s, lo, hi)
     assert m.max_speed_near_stop_rad_s <= 0.3 and m.final_speed_rad_s <= 0.01 and m.inside_range
+
+
+def test_lowering_at_the_limit_stays_in_the_joint_range_with_a_stiff_stop_weight():
+    """The nominal sweep's seed 742431198 (plant winding capacity -12 %, friction +28 %, 54 °C start): the winding
+    reaches the limit as the lowering starts. With stop_approach as cheap as one_way (stop_weight 10, the default)
+    the planner lets the 40 kg arm fall to save braking heat, the re-solves fail and the derated fallback lets it
+    run 0.36 rad past the elbow's stop (``range_excess_rad``, the TRUE position against the model's URDF range;
+    the message says so). With stop_weight 1e5 it plans a braked lowering and stays in range (not the default: it regresses
+    the hard back-off band and the identification loop's oracle row, benchmarks/README.md)."""
+    from thermo_ddp.studies.sweep import CONTROLLER, NOMINAL_PLAN, OBSERVER, draw
+    from thermo_ddp.tasks.limits import joint_range_rad
+
+    results = {}
+    for weight in (10.0, 1e5):
+        settings = MPCSettings.from_options(**{**CONTROLLER, **NOMINAL_PLAN, **draw(742431198)}, stop_weight=weight)
+        results[weight] = run_closed_loop(settings, observer=OBSERVER, progress=False)
+    lo, hi = (float(b[0]) for b in joint_range_rad(build_models(results[1e5].settings)[0]))
+    cheap, braked = results[10.0], results[1e5]
+    assert "left the joint range" in cheap.message and "left the joint range" not in results[1e5].message
+    assert cheap.range_excess_rad.max() == pytest.approx(cheap.q_rad.max() - hi) and cheap.q_rad.max() > hi + 0.1
+    assert braked.success and lo <= braked.q_rad.min() and braked.q_rad.max() <= hi, braked.report()
+    assert braked.range_excess_rad.max() == 0 and braked.step_status.count("fallback") <= 3
+    assert not any(e.max() > 0 for e in braked.actuator_excess.values())

@@ -151,11 +151,14 @@ def test_failed_resolves_are_counted_per_run_and_summarised():
     the report add them up and never say none when there were some."""
     from thermo_ddp.studies.sweep import SweepResult
 
-    def run(seed, **events):
+    def run(seed, excess=0.0, **events):
         return {"seed": seed, "success": True, "violations": 0, "cutoff_trips": 0, "hold_ratio": 1.0,
-                "margin_c": 1.0, "fallbacks": sum(events.values()), "events": events}
-    runs = (run(1), run(2, solve_failed=2, fallback_plan=2), run(3, solve_timeout=1, fallback_plan=1))
+                "margin_c": 1.0, "fallbacks": sum(events.values()), "events": events,
+                "range_violations": int(excess > 0), "max_range_excess_rad": excess, "actuator_violations": 0}
+    runs = (run(1), run(2, 0.36, solve_failed=2, fallback_plan=2), run(3, solve_timeout=1, fallback_plan=1))
     result = SweepResult({"kind": "serial", "address": "in-process", "workers": 1}, runs, 0, True, 1.0)
     s = result.summary()
     assert s["failed_resolves"] == 3 and s["runs_with_failed_resolves"] == 2 and s["runs_with_fallback"] == 2
     assert "re-solves that failed or came too late: 3 in 2 run(s)" in result.report()
+    assert s["range_violations"] == 1 and s["max_range_excess_rad"] == 0.36 and s["actuator_violations"] == 0
+    assert "runs outside the joint range 1 (largest excess 0.360 rad)" in result.report()

@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW
-from ..tasks.limits import default_limit_c
+from ..tasks.limits import default_limit_c, joint_range_rad
 from .controller import ControlStep, RecedingHorizonController, planning_problem
 from .observer import ExtendedKalmanFilter, ObserverSettings
 from .plant import Measurement, Plant, perturbed_model
@@ -32,7 +32,9 @@ class ClosedLoopResult:
     ``iterations``, ``step_status``, ``hold_s``. ``peak_winding_c`` includes the plant's sub-steps.
     ``planner_x0`` (K, nx) and ``planner_params`` (K, N+1, np): what every solve was given;
     ``measurements`` (K+1): what the observer was given (to re-run a filter offline).
-    ``events`` (K): per period, what happened beyond the normal (sensor samples missing, NaN, repeated,
+    ``joint_range_rad`` (the model's URDF range), ``current_peak_a`` and ``bus_voltage_v`` (the motor's) are
+    the bounds :attr:`range_excess_rad` and :attr:`actuator_excess` measure the true motion and the commands
+    against. ``events`` (K): per period, what happened beyond the normal (sensor samples missing, NaN, repeated,
     the casing sensor stuck or inconsistent and then distrusted, solves failed or late, fallbacks,
     derates, hold shortened, the room changed, a payload mismatch, the cut-off); ``tightening_c`` (K):
     the kelvin added to the planning state's thermal nodes (uncertainty and sensor-fault back-off).
@@ -68,6 +70,9 @@ class ClosedLoopResult:
     measurements: tuple[Measurement, ...]
     events: tuple[tuple[str, ...], ...] = ()
     tightening_c: np.ndarray | None = None
+    joint_range_rad: tuple[float, float] = (-np.inf, np.inf)
+    current_peak_a: float = np.inf
+    bus_voltage_v: float = np.inf
 
     def __repr__(self) -> str:
         return (f"ClosedLoopResult({self.status}, peak winding {self.peak_winding_c:.2f} °C, "
@@ -92,6 +97,19 @@ class ClosedLoopResult:
         return self.limit_c - self.peak_winding_c
 
     @property
+    def range_excess_rad(self) -> np.ndarray:
+        """Per instant, how far the TRUE position is outside the joint range (0 inside)."""
+        lo, hi = self.joint_range_rad
+        return np.maximum(np.maximum(self.q_rad - hi, lo - self.q_rad), 0.0)
+
+    @property
+    def actuator_excess(self) -> dict[str, np.ndarray]:
+        """Per period, how far the current sent is over the motor's peak (A) and the motor voltage over the bus
+        voltage (V), at t_k (0 within)."""
+        return {"current_a": np.maximum(np.abs(self.current_a) - self.current_peak_a, 0.0),
+                "voltage_v": np.maximum(np.abs(self.voltage_v) - self.bus_voltage_v, 0.0)}
+
+    @property
     def estimation_error_c(self) -> np.ndarray:
         return self.estimated_winding_c - self.winding_c
 
@@ -114,6 +132,7 @@ class ClosedLoopResult:
         return {"success": self.success, "status": self.status, "message": self.message,
                 "limit_c": self.limit_c, "planning_limit_c": self.settings.planning_limit_c,
                 "peak_winding_c": self.peak_winding_c, "margin_c": self.margin_c,
+                "max_range_excess_rad": float(self.range_excess_rad.max()),
                 "peak_casing_measured_c": float(self.measured_casing_c.max()),
                 "cutoff_tripped": self.cutoff_tripped, "safety_cutoff_c": self.safety_cutoff_c,
                 "requested_hold_s": self.settings.scenario.hold_s, "planned_hold_s": float(self.hold_s[-1]),
@@ -317,6 +336,25 @@ def run_closed_loop(settings: MPCSettings | None = None, *, solver=None, observe
     return _result(settings, plant, log_, tripped)
 
 
+def _verdict(settings: MPCSettings, plant: Plant, tripped: bool, range_excess_rad: float) -> tuple[bool, str, str]:
+    """success, status and message: the cut-off, then the true winding over the limit; the message also says when
+    the true position left the joint range (counted by the sweep; not yet a failed status: the default planner
+    still leaves it in some loops, benchmarks/README.md)."""
+    peak = plant.peak_winding_c
+    if tripped:
+        success, status = False, "safety_cutoff"
+        message = f"the measured casing reached the {plant.safety_cutoff_c:g} °C cut-off"
+    elif peak > settings.limit_c:
+        success, status = False, "winding_limit_exceeded"
+        message = f"the true winding reached {peak:.2f} °C > {settings.limit_c:g} °C"
+    else:
+        success, status = True, "completed"
+        message = f"the true winding stayed {settings.limit_c - peak:.2f} K under the limit"
+    if range_excess_rad > 0:
+        message += f"; the arm left the joint range by {range_excess_rad:.3f} rad"
+    return success, status, message
+
+
 def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> ClosedLoopResult:
     model, r = plant.model, log_.rows
     xs = np.array(r["x"])
@@ -328,15 +366,9 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
     drive = node("drive") if "drive" in model.networks[model.joints[0]].nodes else None
     peak = plant.peak_winding_c
     fallbacks = sum(s.status == "fallback" for s in steps)
-    if tripped:
-        success, status = False, "safety_cutoff"
-        message = f"the measured casing reached the {plant.safety_cutoff_c:g} °C cut-off"
-    elif peak > settings.limit_c:
-        success, status = False, "winding_limit_exceeded"
-        message = f"the true winding reached {peak:.2f} °C > {settings.limit_c:g} °C"
-    else:
-        success, status = True, "completed"
-        message = f"the true winding stayed {settings.limit_c - peak:.2f} K under the limit"
+    lo, hi = (float(b[0]) for b in joint_range_rad(model))
+    q = xs[:, model.index(model.joints[0], "q_rad")]
+    success, status, message = _verdict(settings, plant, tripped, float(np.max(np.maximum(q - hi, lo - q))))
     if fallbacks:
         message += f"; {fallbacks} periods used the fallback control"
     faults = sorted({e for names in r["events"] for e in names} - {"casing_repeat", "casing_missing"})
@@ -360,4 +392,7 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
         hold_s=np.array([s.hold_s for s in steps]), peak_winding_c=float(peak),
         safety_cutoff_c=plant.safety_cutoff_c, cutoff_tripped=tripped, planner_x0=np.array(r["x0"]),
         planner_params=np.array(r["params"]), measurements=tuple(r["measurements"]), events=tuple(r["events"]),
-        tightening_c=np.array(r["tightening"], dtype=float))
+        tightening_c=np.array(r["tightening"], dtype=float),
+        joint_range_rad=(lo, hi),
+        current_peak_a=float(model.params[first].motor.current_peak_a),
+        bus_voltage_v=float(model.params[first].motor.bus_voltage_v))

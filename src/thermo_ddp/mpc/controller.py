@@ -71,7 +71,7 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
     problem = planner_ocp(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
-                          settings.controller.motion_weight)
+                          settings.controller.motion_weight, settings.controller.stop_weight)
     return dataclasses.replace(lp, problem=problem)
 
 
@@ -80,7 +80,7 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
 FREE_AT_PRESENT = ("hold_band", "winding_limit")
 PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
-ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (motion_weight 0): moved from x_k to x_{k+1}
+ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (weight 0): moved from x_k to x_{k+1}
 
 
 def free_present(params: np.ndarray, layout) -> np.ndarray:
@@ -93,10 +93,11 @@ def free_present(params: np.ndarray, layout) -> np.ndarray:
 
 
 def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
-                motion_weight: float = 0.0) -> OptimalControlProblem:
+                motion_weight: float = 0.0, stop_weight: float = 0.0) -> OptimalControlProblem:
     """The lift OCP as the receding-horizon planner solves it: the winding's back-off made soft when
-    ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when ``motion_weight`` > 0 (hard:
-    moved from x_k to x_{k+1} = f(x_k, u_k, p_k), renamed ``<name>_next``).
+    ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when their weight is > 0 (``one_way``:
+    ``motion_weight``, ``stop_approach``: ``stop_weight``; 0: hard, moved from x_k to x_{k+1} = f(x_k, u_k, p_k),
+    renamed ``<name>_next``).
 
     The state's rows never bind the measured present state x_0: the window switches off the winding limit and
     the hold band there (:func:`free_present`), so the constrained states are x_1..x_N. Otherwise an estimate a
@@ -124,9 +125,10 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
     x, u, p = (ca.SX.sym(n, problem.dynamics.size1_in(i)) for i, n in enumerate(problem.dynamics.name_in()))
     x_next = problem.dynamics(x, u, p)
     constraints, costs = [], list(problem.costs)
+    weights = dict(zip(SOFT_ROWS, (stop_weight, motion_weight)))
     for c in problem.constraints:
-        if c.name in SOFT_ROWS and motion_weight > 0:
-            costs.append(c.penalty(motion_weight, f"{c.name}_penalty"))
+        if weights.get(c.name, 0.0) > 0:
+            costs.append(c.penalty(weights[c.name], f"{c.name}_penalty"))
             continue
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"

@@ -59,7 +59,7 @@ class ScenarioSettings:
                   max_iterations="[1, inf)", feasibility_tolerance="(0, inf)", warm_penalty_max="(0, inf)",
                   hold_step_s="(0, inf)", max_retries="[0, inf)", uncertainty_sigmas="[0, inf)",
                   sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)",
-                  motion_weight="[0, inf)", robust_uncertainty="[0, 1)", robust_sigmas="[0, inf)",
+                  motion_weight="[0, inf)", stop_weight="[0, inf)", robust_uncertainty="[0, 1)", robust_sigmas="[0, inf)",
                   robust_replan_s="(0, inf)")
 class ControllerSettings:
     """Receding-horizon DDP: a solve slower than ``max_solve_s`` is discarded (a real-time deadline); the
@@ -69,7 +69,8 @@ class ControllerSettings:
     deviations of the winding estimate, plus ``sensor_fault_backoff_c`` once the casing sensor is
     distrusted; ``derate`` caps the fallback current at the no-heating current near the limit;
     ``careful_motion``: the planner's lift with ``LiftSettings.careful_motion`` (on, as the lift's); its rows cost
-    ``0.5 * motion_weight * excess_rad_s^2`` instead of binding (0: hard, from x_1 on); ``robust_uncertainty``
+    ``0.5 * weight * excess_rad_s^2`` instead of binding (``motion_weight`` for ``one_way``, ``stop_weight`` for
+    ``stop_approach``; 0: hard, from x_1 on); ``robust_uncertainty``
     > 0: the hold kept safe for every motor of the file's values within +-that fraction, its resistances
     narrowed to the observer's ``robust_sigmas`` interval, reviewed every ``robust_replan_s``
     (:mod:`thermo_ddp.mpc.robust`; 0: the nominal hold)."""
@@ -90,7 +91,8 @@ class ControllerSettings:
     ambient_change_c: float = 1.0        # the planner's ambient follows the room beyond this change
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
     careful_motion: bool = True          # one_way and stop_approach in the planner (mpc.controller)
-    motion_weight: float = 10.0          # > 0: careful motion's rows soft, 0.5 * w * excess^2 (mpc.controller)
+    motion_weight: float = 10.0          # > 0: one_way soft, 0.5 * w * excess^2 (mpc.controller)
+    stop_weight: float = 10.0            # > 0: stop_approach soft, 0.5 * w * excess^2 (mpc.controller)
     robust_uncertainty: float = 0.0      # the set's +-fraction (mpc.robust); 0: nominal planning
     robust_sigmas: float = 2.0           # the resistances' interval: the EKF's scale +- this many std
     robust_replan_s: float = 0.5         # the set and the hold reviewed this often while lifting and holding

@@ -13,9 +13,13 @@ opposite sign), inequality multipliers mu_k >= 0 (g <= 0) and control-bound mult
 - complementarity: the largest |mu g| and |z (u - bound)|, and any wrong-signed multiplier |min(mu, 0)|.
 
 A solver that has no costates (or no bound multipliers) of its own leaves them out: the costates are then
-the exact adjoint of its trajectory and multipliers (lam_N = dL_N/dx_N, lam_k = dL_k/dx_k, so the x rows
-vanish: the reduced gradient, as DDP's convergence test measures it), and the bound multipliers the
-projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhere).
+the least-squares multipliers of the dynamics at its trajectory and inequality multipliers (the lam_1..lam_N
+that minimise the Euclidean norm of every stationarity row; the controls at a bound left out of the fit), and
+the bound multipliers the projection z = -dL/du on the controls at a bound (pushing outwards; zero elsewhere).
+One sparse solve of the block-tridiagonal normal equations (blocks of nx), not a recursion: the exact adjoint
+lam_k = dL_k/dx_k propagated backwards through A_k' grows without bound on a long horizon whose
+linearisation is unstable backwards (measured 9.4e17 on a converged 40 kg lift), while the least-squares
+residual stays at the size of the reduced gradient |Qu| that DDP's convergence test measures.
 """
 from __future__ import annotations
 
@@ -23,6 +27,8 @@ import weakref
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 KKT_KEYS = ("stationarity", "primal", "complementarity")
 BOUND_TOL = 1e-9  # a control this close to its bound is at it (for the projected bound multipliers)
@@ -47,9 +53,9 @@ class _KnotFunctions:
         L = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(mu, g) + ca.dot(lam_next, f)
         Lx, Lu = ca.gradient(L, x), ca.gradient(L, u)
         self.stage = ca.Function("kkt_stage", [x, u, p, mu, lam_next, xn], [Lx, Lu, g, f - xn])
-        # the adjoint, accumulated backwards: lam_k = dL_k/dx_k (lam_next the carried input), with the rest of
-        # the stage's figures from the same sweep (one pass over the knots instead of two)
-        self.adjoint = ca.Function("kkt_adjoint", [lam_next, x, u, p, mu, xn], [Lx, Lu, g, f - xn])
+        # the stationarity rows are affine in lam_next: [Lx; Lu] = [Lx; Lu](lam_next = 0) + [A'; B'] lam_next
+        # (column-major vec of A, B: the row-major A', B')
+        self.jacobians = ca.Function("kkt_jacobians", [x, u, p], [ca.vec(ca.jacobian(f, x)), ca.vec(ca.jacobian(f, u))])
         gN = F.terminal_constraint(x, p)
         LN = 0.5 * ca.sumsqr(F.terminal_residual(x, p)) + ca.dot(muN, gN)
         self.terminal = ca.Function("kkt_terminal", [x, p, muN], [ca.gradient(LN, x), gN])
@@ -70,28 +76,30 @@ class KKTEvaluator:
         if knots is None:
             knots = _KNOTS[problem.functions] = _KnotFunctions(problem)
         self._knots = knots
-        self._stage, self._adjoint, self._terminal = knots.stage, knots.adjoint, knots.terminal
+        self._stage, self._terminal = knots.stage, knots.terminal
         self._maps = knots.maps
 
     def _mapped(self, N: int):
         if N not in self._maps:
-            self._maps[N] = (self._stage.map(N), self._adjoint.mapaccum(N))
+            self._maps[N] = (self._stage.map(N), self._knots.jacobians.map(N))
         return self._maps[N]
 
     def costates(self, xs, us, params, mu, muN) -> np.ndarray:
-        """The exact adjoint (N+1, nx) of the trajectory with inequality multipliers mu (N, ng), muN (ngN)."""
-        return self._adjoint_sweep(xs, us, params, np.asarray(mu), muN)[0]
-
-    def _adjoint_sweep(self, xs, us, params, mu, muN):
-        """(costates (N+1, nx), Lu (N, nu), G (N, ng), gaps (N, nx)): the exact adjoint and the stage figures
-        along it, in one backward sweep."""
-        N = len(us)
-        _, adjoint = self._mapped(N)
-        lamN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
-        rev = slice(None, None, -1)
-        acc, Lu, G, C = (np.asarray(v).T[rev] for v in adjoint(lamN, xs[:N][rev].T, us[rev].T, params[:N][rev].T,
-                                                                mu[rev].T, xs[1:][rev].T))
-        return np.vstack([acc, lamN]), Lu, G, C
+        """The least-squares multipliers of the dynamics (N+1, nx; row 0 unused: x_0 is fixed) at the trajectory
+        with inequality multipliers mu (N, ng), muN (ngN): argmin over lam_1..lam_N of the stationarity rows'
+        Euclidean norm, the rows of controls at a bound left out."""
+        pr, N = self.problem, len(us)
+        nx, nu = pr.nx, pr.nu
+        stage, jacobians = self._mapped(N)
+        zero = np.zeros((nx, N))
+        Lx, Lu = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, zero, xs[1:].T)[:2])
+        At, Bt = (np.asarray(v).T.reshape(N, n, nx) for v, n in zip(jacobians(xs[:-1].T, us.T, params[:-1].T),
+                                                                    (nx, nu)))
+        LxN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
+        free = ~_at_bound(us, pr.u_lb, pr.u_ub)
+        M, b = _stationarity_system(At, Bt, free, np.concatenate([(Lu * free).ravel(), Lx[1:].ravel(), LxN]))
+        lam = spla.spsolve((M.T @ M).tocsc(), -(M.T @ b))
+        return np.vstack([np.zeros(nx), np.asarray(lam).reshape(N, nx)])
 
     def residuals(self, xs, us, params, mu, muN, x0, costates=None, bound_multipliers=None) -> dict[str, float]:
         """The KKT residuals at the trajectory from ``x0``; ``costates`` (N+1, nx) and ``bound_multipliers``
@@ -100,13 +108,11 @@ class KKTEvaluator:
         xs, us, params = (np.asarray(a, dtype=float) for a in (xs, us, params))
         mu = np.asarray(mu, dtype=float).reshape(len(us), pr.n_constraints)
         muN = np.asarray(muN, dtype=float).ravel()
-        if costates is None:  # the exact adjoint: its x rows vanish (Lx_k = lam_k)
-            costates, Lu, G, C = self._adjoint_sweep(xs, us, params, mu, muN)
-            Lx = costates[:-1]
-        else:
-            stage, _ = self._mapped(len(us))
-            Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
-                                                            xs[1:].T))
+        if costates is None:
+            costates = self.costates(xs, us, params, mu, muN)
+        stage, _ = self._mapped(len(us))
+        Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
+                                                        xs[1:].T))
         LxN, GN = (np.asarray(v).ravel() for v in self._terminal(xs[-1], params[-1], muN))
         lb, ub = np.broadcast_to(pr.u_lb, us.shape), np.broadcast_to(pr.u_ub, us.shape)
         z = _projected_bound_multipliers(Lu, us, lb, ub) if bound_multipliers is None else bound_multipliers
@@ -117,6 +123,28 @@ class KKTEvaluator:
                 np.abs(z_lo * np.where(np.isfinite(lb), us - lb, 0.0)),
                 np.abs(z_up * np.where(np.isfinite(ub), ub - us, 0.0))]
         return {"stationarity": _largest(stat), "primal": _largest(primal), "complementarity": _largest(comp)}
+
+
+def _at_bound(us, lb, ub) -> np.ndarray:
+    """(N, nu): the controls within :data:`BOUND_TOL` of a bound."""
+    lb, ub = np.broadcast_to(lb, us.shape), np.broadcast_to(ub, us.shape)
+    return (us <= lb + BOUND_TOL) | (us >= ub - BOUND_TOL)
+
+
+def _stationarity_system(At, Bt, free, b):
+    """The stationarity rows b + M lam (lam = [lam_1; ..; lam_N]): the controls' rows B_k' lam_{k+1} (zero
+    where a control is at a bound: its multiplier takes the row), then the states' rows A_k' lam_{k+1} - lam_k
+    (k = 1..N-1) and -lam_N."""
+    N, nu, nx = Bt.shape
+    k, i, j = np.indices((N, nu, nx))
+    u_rows, u_cols, u_vals = k * nu + i, k * nx + j, Bt * free[:, :, None]
+    k, i, j = np.indices((N - 1, nx, nx))
+    a_rows, a_cols = N * nu + k * nx + i, (k + 1) * nx + j
+    diag = np.arange(N * nx)
+    rows = np.concatenate([u_rows.ravel(), a_rows.ravel(), N * nu + diag])
+    cols = np.concatenate([u_cols.ravel(), a_cols.ravel(), diag])
+    vals = np.concatenate([u_vals.ravel(), At[1:].ravel(), -np.ones(N * nx)])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(N * (nu + nx), N * nx)), b
 
 
 def _projected_bound_multipliers(Lu, us, lb, ub):

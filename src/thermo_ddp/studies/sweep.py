@@ -93,9 +93,14 @@ def sweep_run(seed: int, short: bool = False, nominal_plan: bool = False) -> dic
         r = run_closed_loop(settings, solver=solver, observer=OBSERVER, progress=False)
         n = run_closed_loop(nominal, solver=solver, observer=OBSERVER, progress=False)
     hold, nominal_hold = float(r.hold_s[-1]), float(n.hold_s[-1])
+    excess, actuator = r.range_excess_rad, r.actuator_excess
     return {"seed": int(seed), "success": bool(r.success), "status": r.status, "message": r.message,
             "max_winding_c": float(r.peak_winding_c), "limit_c": float(r.limit_c),
             "violations": int(np.count_nonzero(r.winding_c > r.limit_c)), "cutoff_trips": int(r.cutoff_tripped),
+            "range_violations": int(np.count_nonzero(excess > 0)), "max_range_excess_rad": float(excess.max()),
+            "actuator_violations": int(np.count_nonzero(np.logical_or(*(e > 0 for e in actuator.values())))),
+            "max_current_excess_a": float(actuator["current_a"].max()),
+            "max_voltage_excess_v": float(actuator["voltage_v"].max()),
             "achieved_hold_s": hold, "nominal_hold_s": nominal_hold,
             "hold_ratio": hold / nominal_hold if nominal_hold > 0 else None,
             "margin_c": float(r.margin_c), "nominal_margin_c": float(n.margin_c),
@@ -154,6 +159,9 @@ class SweepResult:
         return {"runs": len(self.runs), "failed_runs": len(self.runs) - len(done),
                 "violations": sum(r["violations"] > 0 for r in done),
                 "cutoff_trips": sum(r["cutoff_trips"] for r in done),
+                "range_violations": sum(r["range_violations"] > 0 for r in done),
+                "max_range_excess_rad": max((r["max_range_excess_rad"] for r in done), default=None),
+                "actuator_violations": sum(r["actuator_violations"] > 0 for r in done),
                 "median_hold_ratio": float(np.median(ratios)) if ratios else None,
                 "min_hold_ratio": float(np.min(ratios)) if ratios else None,
                 "min_margin_c": min((r["margin_c"] for r in done), default=None),
@@ -173,6 +181,7 @@ class SweepResult:
         s = self.summary()
         ratio = "n/a" if s["median_hold_ratio"] is None else f"{s['median_hold_ratio']:.2f}"
         margin = "n/a" if s["min_margin_c"] is None else f"{s['min_margin_c']:.2f} K"
+        excess = "n/a" if s["max_range_excess_rad"] is None else f"{s['max_range_excess_rad']:.3f} rad"
         failed = [r["seed"] for r in self.runs if "error" in r]
         plan = "nominal hold" if self.nominal_plan else f"hold robust to +-{100 * THERMAL_SPREAD:g} %"
         engine = f"{self.engine['kind']} ({self.engine['address']}, {self.engine['workers']} workers)"
@@ -182,6 +191,8 @@ class SweepResult:
                     "the JSON)" if failed else ""),
                  f"  runs over the winding limit {s['violations']}, cut-off trips {s['cutoff_trips']}, "
                  f"minimum margin {margin}",
+                 f"  runs outside the joint range {s['range_violations']} (largest excess {excess}), "
+                 f"over the current peak or the bus voltage {s['actuator_violations']}",
                  f"  median hold / nominal hold {ratio}",
                  f"  re-solves that failed or came too late: {s['failed_resolves']} in "
                  f"{s['runs_with_failed_resolves']} run(s); runs that used the fallback plan {s['runs_with_fallback']}"]

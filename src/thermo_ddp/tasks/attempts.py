@@ -83,7 +83,8 @@ class SolverLadder:
 
     def __init__(self, problem: OptimalControlProblem, primary, ddp_settings: DDPSettings | None = None):
         self.problem, self.primary = problem, primary
-        default = primary.settings if isinstance(primary, DDPSolver) else DDPSettings()
+        ddp = primary if isinstance(primary, DDPSolver) else getattr(primary, "solver", None)
+        default = ddp.settings if isinstance(ddp, DDPSolver) else DDPSettings()
         self.ddp_settings = ddp_settings or default
 
     @functools.cached_property
@@ -99,16 +100,19 @@ class SolverLadder:
         """The ladder on ``tp`` from ``guess``: DDP's four steps (the last, IPOPT, unless ``reference`` is off:
         e.g. in a real-time loop), or a reference solver from two guesses."""
         x0, p, first = tp.x0, tp.params, self.primary
+        plain = WarmStart(guess.xs, guess.us)
+        restarts = [("ddp regularised restart", lambda: self.restart.solve(x0, p, plain)),
+                    ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp)))]
         if not isinstance(first, DDPSolver):  # a reference solver, or a wrapper of one (e.g. a fault injector)
             name = first.plugin if isinstance(first, (IpoptSolver, FatropSolver)) else type(first).__name__
+            wrapped_ddp = isinstance(getattr(first, "solver", None), DDPSolver)  # its restarts too, as unwrapped
             return solve_until_verdict(((name, lambda: first.solve(x0, p, guess)),
-                                        (f"{name} from rest", lambda: first.solve(x0, p, rest_guess(tp)))))
-        plain = WarmStart(guess.xs, guess.us)
+                                        (f"{name} from rest", lambda: first.solve(x0, p, rest_guess(tp))),
+                                        *(restarts if wrapped_ddp else ())))
         rungs = [("ddp", lambda: first.solve(x0, p, plain))]
         if guess.multipliers:
             rungs.insert(0, ("ddp from the multipliers", lambda: first.solve(x0, p, guess, callback=_capped)))
-        rungs += [("ddp regularised restart", lambda: self.restart.solve(x0, p, plain)),
-                  ("ddp regularised from rest", lambda: self.restart.solve(x0, p, rest_guess(tp)))]
+        rungs += restarts
         if reference:
             rungs.append(("ipopt", lambda: self.reference.solve(x0, p, WarmStart(guess.xs, guess.us))))
         return solve_until_verdict(rungs)
