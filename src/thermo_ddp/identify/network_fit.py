@@ -14,7 +14,8 @@ equilibrium of its own equation with the measured nodes held there (the first in
 
 95 % intervals: s^2 (J^T J)^-1 of the weighted problem, inflated by sqrt(integrated autocorrelation
 time) of the residuals (output-error residuals are autocorrelated), log-normal for log-scaled values; that
-covariance (inflated, of log(value) or value) of the values with an interval is the file's ``[covariance]``.
+covariance (inflated, of log(value) or value) of the values with an interval, the others held at their fitted
+values (the inverse of the information matrix's block of those values), is the file's ``[covariance]``.
 """
 from __future__ import annotations
 
@@ -156,7 +157,7 @@ class NetworkFit:
     success: bool
     status: str
     message: str = ""
-    theta_covariance: np.ndarray | None = None   # of theta (as stderr: inflated), free x free
+    information: np.ndarray | None = None   # J^T J / (s^2 tau) of theta (the inverse of stderr^2's covariance)
 
     @property
     def values(self) -> dict[str, float]:
@@ -211,12 +212,16 @@ class NetworkFit:
         return {f.path: list(self.interval(f.path)) for f in self.free if self.pinned(f.path)}
 
     def covariance(self) -> Covariance | None:
-        """The covariance of the values :meth:`uncertainty` gives intervals to (the file's ``[covariance]``)."""
+        """The covariance of the values :meth:`uncertainty` gives intervals to, the values it gives none held at
+        the fitted ones (the file's ``[covariance]``: what validate and the planner vary, the others as written)."""
         keep = [i for i, f in enumerate(self.free) if self.pinned(f.path)]
-        if self.theta_covariance is None or not keep:
+        if self.information is None or not keep:
             return None
+        block = self.information[np.ix_(keep, keep)]
+        d = np.sqrt(np.diag(block))
+        cov = np.linalg.pinv(block / np.outer(d, d), hermitian=True) / np.outer(d, d)
         return Covariance.of([self.free[i].path for i in keep], ["log" if self.free[i].log else "linear" for i in keep],
-                             self.theta_covariance[np.ix_(keep, keep)])
+                             0.5 * (cov + cov.T))
 
     def undetermined(self) -> dict[str, tuple[float, float]]:
         """The fitted values the data do not pin down, with their 95 % intervals within the range searched."""
@@ -301,12 +306,14 @@ def _result(model: NetworkModel, grids, theta, weights, noise, sensors, ok, stat
     seen = [r / noise[node] for (g, node), r in residuals.items()
             if weights[[x.name for x in grids].index(g)]]
     tau = sum(r.size for r in seen) / sum(r.size / integrated_autocorrelation(r) for r in seen)
-    stderr, cov = {}, None
+    stderr, info = {}, None
     if model.free:
         _, jac = _residuals(model, grids, theta, weights, noise, sensors)
-        cov = tau * covariance(jac, np.concatenate(seen))[0]
-        stderr = {f.path: math.sqrt(max(cov[i, i], 0.0)) for i, f in enumerate(model.free)}
+        r = np.concatenate(seen)
+        cov, _ = covariance(jac, r)
+        stderr = {f.path: math.sqrt(tau * max(cov[i, i], 0.0)) for i, f in enumerate(model.free)}
+        info = jac.T @ jac / (tau * float(r @ r) / max(r.size - len(model.free), 1))
     finite = all(np.all(np.isfinite(r)) for r in residuals.values())
     return NetworkFit(spec, model.sensor, model.free, stderr, residuals, simulated, noise, tau, bool(ok and finite), status,
-                      str(message), cov)
+                      str(message), info)
 
