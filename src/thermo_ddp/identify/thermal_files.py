@@ -5,7 +5,8 @@ A legacy file whose network measures only the recording's ``temperature_c`` is f
 recordings with further sensors that are nodes of the file's network, by
 :func:`~thermo_ddp.identify.network_fit.fit_network` on the file's network, every sensor at once (a sensor the
 network has no node for is left out and named: ``diagnose`` adds such nodes).  The file written carries
-``[uncertainty]`` (95 % interval of every fitted value), ``[covariance]`` (their joint uncertainty) and ``[envelope]`` (what the recordings cover).
+``[uncertainty]`` (95 % interval of every fitted value), ``[covariance]`` (their joint uncertainty) and
+``[envelope]`` (what the recordings cover).
 """
 from __future__ import annotations
 

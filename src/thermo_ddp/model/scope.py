@@ -70,6 +70,15 @@ class Covariance:
     def of(cls, paths, scale, matrix) -> "Covariance":
         return cls(tuple(paths), tuple(scale), tuple(tuple(float(v) for v in row) for row in np.asarray(matrix)))
 
+    @classmethod
+    def of_errors(cls, paths, log, values, stderr, correlation) -> "Covariance | None":
+        """From standard errors of the values and their correlation matrix (a log-scaled value's error relative to
+        it); None unless every error is finite and > 0."""
+        sigma = np.asarray(stderr, float) / np.where(log, np.asarray(values, float), 1.0)
+        if not sigma.size or not np.all(np.isfinite(sigma) & (sigma > 0)):
+            return None
+        return cls.of(paths, ["log" if g else "linear" for g in log], np.asarray(correlation, float) * np.outer(sigma, sigma))
+
     @property
     def array(self) -> np.ndarray:
         return np.array(self.matrix, float).reshape(len(self.paths), len(self.paths))

@@ -14,7 +14,8 @@
 - :class:`WorstCase`: the replay of a plan (its current and motion) through the scenario model, exactly
   as the planner's constraint sees it, and the motor of the set with the highest winding peak: gradient
   ascent in the set (L-BFGS-B on the box, SLSQP in the ellipsoid's ball) from the point the gradient at the
-  file's values points to (a vertex; the ellipsoid's first-order worst point) and from a few more. Every motor starts from its own equilibrium at rest, from given temperatures, or with its
+  file's values points to (a vertex; the ellipsoid's first-order worst point) and from a few more. Every
+  motor starts from its own equilibrium at rest, from given temperatures, or with its
   measured nodes (the casing sensor) at given temperatures and the others at its equilibrium given them.
 """
 from __future__ import annotations
