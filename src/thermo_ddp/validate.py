@@ -226,13 +226,13 @@ class _Simulator:
 
 
 def _with_rest_shares(params: JointParameters, values: Mapping[str, object]) -> dict[str, object]:
-    """``values`` and, for a network whose split shares they move, each split's first share as the rest (the
-    fit's parametrisation: shares sum to 1, :func:`~thermo_ddp.identify.network.with_values`)."""
+    """``values`` and, for a network whose split shares they move, each split's first share (unless moved
+    itself) as the rest (the fit's parametrisation: shares sum to 1, :func:`~thermo_ddp.identify.network.with_values`)."""
     shares = {k: v for k, v in values.items() if ".split." in k}
     if params.thermal.network is None or not shares:
         return dict(values)
     full = values_of(with_network_values(params.thermal.general, shares))
-    return dict(values) | {k: v for k, v in full.items() if ".split." in k}
+    return dict(values) | {k: v for k, v in full.items() if ".split." in k and k not in values}
 
 
 def _simulator(params: JointParameters, paths: Sequence[str] = ()) -> _Simulator:
