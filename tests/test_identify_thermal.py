@@ -172,7 +172,12 @@ def test_csv_entry_point_returns_a_loadable_parameter_file(tmp_path):
     for k, var in zip(cov.paths, np.diag(cov.array)):
         lo, hi = loaded.scope.uncertainty[k]
         assert np.log(hi / lo) == pytest.approx(2 * 1.959964 * np.sqrt(var), rel=1e-6)
-    assert -1 < cov.array[0, 1] / np.sqrt(cov.array[0, 0] * cov.array[1, 1]) < 1
+    rho = cov.array[0, 1] / np.sqrt(cov.array[0, 0] * cov.array[1, 1])
+    assert -1 < rho < 1
+    fixed = loaded.replace("thermal", capacity_j_per_k=1.1 * loaded.thermal["capacity_j_per_k"])  # now as written:
+    r = cov.paths.index("thermal.resistance_k_per_w")  # the resistance's variance given it
+    assert fixed.scope.covariance.paths == ("thermal.resistance_k_per_w",)
+    assert fixed.scope.covariance.array[0, 0] == pytest.approx(cov.array[r, r] * (1 - rho ** 2))
     assert loaded.scope.envelope["current_a"][1] == pytest.approx(np.abs(rec.to_recording().current_a).max())
     bad = tmp_path / "no_temp.csv"
     rec.to_csv(bad, columns=("time_s", "current_a"))

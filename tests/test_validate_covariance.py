@@ -15,6 +15,7 @@ from thermo_ddp.errors import InputError
 from thermo_ddp.identify.thermal_data import ThermalSettings
 from thermo_ddp.identify.thermal_files import identify_network_files
 from thermo_ddp.model.parameters import dumps_parameters, parameters_from_dict
+from thermo_ddp.model.scope import Covariance
 from thermo_ddp.recordings import Recording
 from thermo_ddp.validate import validate_thermal
 
@@ -78,8 +79,10 @@ def test_identify_writes_the_covariance_and_the_file_reads_it_back():
         assert width == pytest.approx(2 * 1.959964 * np.sqrt(var), rel=0.05)  # marginal >= conditional, close here
     back = parameters_from_dict(__import__("tomllib").loads(dumps_parameters(params)), "back.toml")
     assert back.scope.covariance == cov
-    dropped = params.replace("motor", resistance_ohm=0.21)  # a value replaced: its row goes with its interval
-    assert dropped.scope.covariance.paths == cov.paths
+    assert params.replace("motor", resistance_ohm=0.21).scope.covariance == cov  # no interval: nothing to drop
+    pair = Covariance.of(["a", "b"], ["log", "log"], [[0.04, -0.018], [-0.018, 0.09]])  # sd 0.2, 0.3, rho -0.3
+    held = pair.restricted(["a"])  # b now held as written: a's variance given b, sd_a^2 (1 - rho^2)
+    assert held.paths == ("a",) and held.array[0, 0] == pytest.approx(0.04 * (1 - 0.3 ** 2))
     data = params.to_dict()
     bad = {"paths": lambda c: c | {"paths": c["paths"][:-1]}, "scale": lambda c: c | {"scale": ["cubic"] * len(c["paths"])},
            "matrix": lambda c: c | {"matrix": [[-v for v in r] for r in c["matrix"]]},

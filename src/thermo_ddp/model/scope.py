@@ -57,10 +57,11 @@ class Alternative:
 
 @dataclass(frozen=True)
 class Covariance:
-    """The fit's covariance of the ``[uncertainty]`` values (``paths``), each in the parametrisation its
-    interval uses (``scale``: ``log``, the value's logarithm, or ``linear``, the value): one standard
-    deviation, symmetric positive semi-definite.  It says what the intervals alone cannot: which values
-    compensate each other (two resistances in series whose sum the data pin down)."""
+    """The fit's covariance of the ``[uncertainty]`` values (``paths``) with the file's other values held as
+    written, each in the parametrisation its interval uses (``scale``: ``log``, the value's logarithm, or
+    ``linear``, the value): one standard deviation, symmetric positive semi-definite.  It says what the
+    intervals alone cannot: which values compensate each other (two resistances in series whose sum the data
+    pin down)."""
 
     paths: tuple[str, ...]
     scale: tuple[str, ...]
@@ -88,11 +89,19 @@ class Covariance:
         return np.array([v if s == "log" else 1.0 for v, s in zip(np.asarray(values, float), self.scale)])
 
     def restricted(self, paths) -> "Covariance | None":
-        """The covariance of some of the values (their marginal: the sub-matrix); None for none."""
+        """The covariance of some of the values, the others now held as written (conditioned on them: the Schur
+        complement); None for none."""
         keep = [i for i, p in enumerate(self.paths) if p in set(paths)]
+        held = [i for i in range(len(self.paths)) if i not in keep]
         if not keep:
             return None
-        return Covariance.of([self.paths[i] for i in keep], [self.scale[i] for i in keep], self.array[np.ix_(keep, keep)])
+        a = self.array
+        cov = a[np.ix_(keep, keep)]
+        if held:
+            cov = cov - a[np.ix_(keep, held)] @ np.linalg.pinv(a[np.ix_(held, held)]) @ a[np.ix_(held, keep)]
+        cov = 0.5 * (cov + cov.T)
+        np.fill_diagonal(cov, np.maximum(np.diag(cov), 1e-12 * np.diag(a)[keep]))  # a value fully set by the held
+        return Covariance.of([self.paths[i] for i in keep], [self.scale[i] for i in keep], cov)
 
     def to_dict(self) -> dict[str, Any]:
         return {"paths": list(self.paths), "scale": list(self.scale), "matrix": [list(r) for r in self.matrix]}
@@ -100,7 +109,7 @@ class Covariance:
 
 @dataclass(frozen=True)
 class Scope:
-    """The four optional sections (``heat_sources`` None: the section is absent, every kind allowed)."""
+    """The five optional sections (``heat_sources`` None: the section is absent, every kind allowed)."""
 
     heat_sources: tuple[str, ...] | None = None
     uncertainty: Mapping[str, tuple[float, float]] = field(default_factory=dict)
