@@ -59,8 +59,7 @@ def value_of(params: JointParameters, key: str) -> float:
 @dataclasses.dataclass(frozen=True)
 class UncertaintySet:
     """The values ``keys`` around the file's ``nominal``: the box ``low <= theta <= high``, or (``axes`` given)
-    the ellipsoid theta(z), |z| <= 1 (module docstring), clipped to ``low``, ``high``: its bounding box within
-    the file's intervals; ``label`` says
+    the ellipsoid theta(z), |z| <= 1 (module docstring; ``low``, ``high``: its bounding box); ``label`` says
     where it comes from (``+-20 %``, the file's ``[uncertainty]`` or its ``[covariance]``)."""
 
     keys: tuple[str, ...]
@@ -101,9 +100,7 @@ class UncertaintySet:
         nominal = np.array([value_of(params, k) for k in cov.paths])
         reach = np.sqrt(np.sum(axes ** 2, axis=1))
         low, high = (np.where(log, nominal * np.exp(sign * reach), nominal + sign * reach) for sign in (-1, 1))
-        lo, hi = (np.array([params.scope.uncertainty[k][j] for k in cov.paths]) for j in (0, 1))
-        return cls(cov.paths, nominal, np.maximum(low, lo), np.minimum(high, hi),
-                   "the file's [covariance] (95 % ellipsoid)", axes, log)
+        return cls(cov.paths, nominal, low, high, "the file's [covariance] (95 % ellipsoid)", axes, log)
 
     @property
     def size(self) -> int:
@@ -117,20 +114,15 @@ class UncertaintySet:
         """The values at normalised coordinates ``z``: in [-1, 1]^d (the box's corners at +-1), or |z| <= 1
         (the ellipsoid's principal axes' ends at +-e_k)."""
         z = np.asarray(z, float)
-        if self.is_ellipsoid:  # within each value's interval too (a linear value's ellipsoid may cross 0)
-            return np.clip(self._ellipsoid_theta(z), self.low, self.high)
+        if self.is_ellipsoid:
+            step = self.axes @ z
+            return np.where(self.log, self.nominal * np.exp(step), self.nominal + step)
         return 0.5 * (self.low + self.high) + 0.5 * (self.high - self.low) * z
 
-    def _ellipsoid_theta(self, z) -> np.ndarray:
-        step = self.axes @ np.asarray(z, float)
-        return np.where(self.log, self.nominal * np.exp(step), self.nominal + step)
-
     def dtheta_dz(self, z) -> np.ndarray:
-        """d theta / d z (values x d; zero rows where the ellipsoid is clipped to an interval)."""
+        """d theta / d z (values x d)."""
         if self.is_ellipsoid:
-            raw = self._ellipsoid_theta(z)
-            inside = (raw >= self.low) & (raw <= self.high)
-            return (np.where(self.log, raw, 1.0) * inside)[:, None] * self.axes
+            return np.where(self.log, self.theta(z), 1.0)[:, None] * self.axes
         return np.diag(0.5 * (self.high - self.low))
 
     def z(self, theta) -> np.ndarray:
