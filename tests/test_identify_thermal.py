@@ -168,6 +168,16 @@ def test_csv_entry_point_returns_a_loadable_parameter_file(tmp_path):
     lo, hi = loaded.scope.uncertainty["thermal.capacity_j_per_k"]
     assert lo < loaded.thermal["capacity_j_per_k"] < hi
     assert set(loaded.scope.uncertainty) == {"thermal.capacity_j_per_k", "thermal.resistance_k_per_w"}
+    cov = loaded.scope.covariance  # log values: each interval is the value x exp(+-1.96 sigma), as the fit's errors
+    for k, var in zip(cov.paths, np.diag(cov.array)):
+        lo, hi = loaded.scope.uncertainty[k]
+        assert np.log(hi / lo) == pytest.approx(2 * 1.959964 * np.sqrt(var), rel=1e-6)
+    rho = cov.array[0, 1] / np.sqrt(cov.array[0, 0] * cov.array[1, 1])
+    assert -1 < rho < 1
+    fixed = loaded.replace("thermal", capacity_j_per_k=1.1 * loaded.thermal["capacity_j_per_k"])  # now as written:
+    r = cov.paths.index("thermal.resistance_k_per_w")  # the resistance's variance given it
+    assert fixed.scope.covariance.paths == ("thermal.resistance_k_per_w",)
+    assert fixed.scope.covariance.array[0, 0] == pytest.approx(cov.array[r, r] * (1 - rho ** 2))
     assert loaded.scope.envelope["current_a"][1] == pytest.approx(np.abs(rec.to_recording().current_a).max())
     bad = tmp_path / "no_temp.csv"
     rec.to_csv(bad, columns=("time_s", "current_a"))
@@ -216,10 +226,13 @@ def test_iron_losses_are_written_as_the_contract_iron_loss_the_planner_uses():
     from thermo_ddp.model.thermal import network_from_parameters
     model = ThermalModel(ELBOW, ("casing_node", "iron_losses"))
     values = {k: ELBOW.thermal[k] for k in model.keys if k != IRON_KEY} | {IRON_KEY: 0.03}
-    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name, confidence={IRON_KEY: (0.02, 0.04)})
+    fit = SimpleNamespace(parameters=values, terms=model.terms, model=model.name, confidence={IRON_KEY: (0.02, 0.04)},
+                          stderr={IRON_KEY: 0.006}, correlation={IRON_KEY: {IRON_KEY: 1.0}})
     written = parameters_from_dict(parameter_file(ELBOW, fit, ("rec",)))
     assert written.thermal["iron_loss_w"] == 0.03 and written.thermal["iron_loss_speed_exponent"] == 2.0
     assert written.scope.uncertainty == {"thermal.iron_loss_w": (0.02, 0.04)}  # by the written key's path
+    cov = written.scope.covariance  # fitted on a linear scale: the error itself
+    assert cov.paths == ("thermal.iron_loss_w",) and cov.scale == ("linear",) and cov.array[0, 0] == pytest.approx(0.006 ** 2)
     iron = [s for s in network_from_parameters(written.thermal).sources if s.name == "speed_abs_rad_s"]
     assert len(iron) == 1 and iron[0].node == "winding"
     assert iron[0].power_w({"speed_abs_rad_s": 2.5}) == pytest.approx(0.03 * 2.5 ** 2, rel=1e-15)

@@ -201,3 +201,65 @@ def test_ddp_equals_ipopt_on_the_robust_lift(robust84):
     assert ref.cost <= robust84.solver["cost"] * (1 + 1e-6) and robust84.solver["cost"] <= 1.01 * ref.cost
     longer = solve(rlp.with_hold(robust84.achieved_hold_s + settings.dt_s), "ipopt")
     assert not (longer.success and longer.max_constraint_violation <= 1e-4)
+
+
+def ellipsoid_file(tmp_path, correlation=-0.95):
+    """The elbow's file with intervals and the fit's [covariance] (log values): the winding - casing and
+    casing - ambient resistances in series, their sum pinned down (errors anti-correlated), the copper's resistance."""
+    sigma = {"thermal.winding_casing_k_per_w": 0.2, "thermal.casing_ambient_k_per_w": 0.2, "motor.resistance_ohm": 0.04}
+    nominal = {"thermal.winding_casing_k_per_w": 0.9, "thermal.casing_ambient_k_per_w": 1.3, "motor.resistance_ohm": 0.7}
+    cov = np.diag(list(sigma.values())) ** 2
+    cov[0, 1] = cov[1, 0] = correlation * 0.2 * 0.2
+    lines = ["", "[uncertainty]"] + [f'"{k}" = [{nominal[k] * np.exp(-1.96 * s)}, {nominal[k] * np.exp(1.96 * s)}]'
+                                     for k, s in sigma.items()]
+    lines += ["", "[covariance]", f"paths = {json.dumps(list(sigma))}", 'scale = ["log", "log", "log"]',
+              f"matrix = {json.dumps(cov.tolist())}", ""]
+    path = tmp_path / "identified.toml"
+    path.write_text(ELBOW_FILE.read_text() + "\n".join(lines))
+    return path
+
+
+def test_robust_plan_on_the_files_ellipsoid_holds_for_motors_drawn_from_it(tmp_path, nominal84):
+    """--uncertainty without a number on a file with [covariance]: the set is its 95 % ellipsoid (not the box of
+    the intervals); 150 motors drawn in it, replayed independently from the casing's reading, none more than
+    0.5 K over the limit under the robust plan, many under the nominal one; the worst motor on its boundary."""
+    path = ellipsoid_file(tmp_path)
+    params = load_parameters(path)
+    uset = UncertaintySet.from_file(params, path)
+    assert uset.is_ellipsoid and uset.keys == tuple(params.scope.covariance.paths)
+    axes_ends = np.array([uset.theta(z) for z in np.vstack([np.eye(3), -np.eye(3)])])
+    log_sum = np.log(axes_ends[:, 0]) + np.log(axes_ends[:, 1]) - np.log(0.9 * 1.3)
+    assert np.abs(log_sum).max() < 0.2 < np.abs(np.log(axes_ends[:, 0] / 0.9)).max()  # the sum is pinned down
+    plan = plan_lift(40.0, 84.0, uncertainty="file", parameter_file=str(path))
+    r = plan.robust
+    assert r.uset.is_ellipsoid and r.worst_winding_c <= 84.0 + 0.1
+    assert np.linalg.norm(r.uset.z(r.worst_theta)) == pytest.approx(1.0, abs=1e-3)
+    motors = [uset.parameters(params, th) for th in uset.sample(np.random.default_rng(2), 150)]
+    start = sensor_start(nominal84)
+    assert np.count_nonzero(peaks_over_limit(nominal84, motors, start) > 0.5) >= 10
+    assert peaks_over_limit(plan, motors, start).max() <= 0.5
+    assert plan.to_dict()["robust"]["set"]["set"].startswith("the file's [covariance]")
+
+
+def test_worst_motor_in_the_ellipsoid_beats_sampling_it_and_its_gradient_is_exact(tmp_path, nominal84):
+    """The search in the ellipsoid's ball (SLSQP): its gradient by z (chain rule through the axes and the log
+    scale) against finite differences; its worst motor on the boundary, certified, at least as hot as 200
+    motors drawn in the ellipsoid and its principal axes' ends."""
+    path = ellipsoid_file(tmp_path)
+    lp = build_lift_problem(nominal84.settings)
+    m = lp.model
+    uset = UncertaintySet.from_file(load_parameters(path), path)
+    step = scenario_step(m, uset.keys, lp.settings.dt_s, lp.settings.integrator, LIFT_PARAMETERS.size, env_of)
+    wc = WorstCase(m, uset, step, m.index(m.joints[0], "winding_c"), lp.x0[2:])
+    qv, us, p, amb = nominal84.xs[:, :2], nominal84.us, lp.params, m.ambient_c
+    z0 = np.array([0.3, -0.2, 0.1])
+    peak, grad = wc.peak(uset.theta(z0), qv, us, p, amb)
+    dz = grad @ uset.dtheta_dz(z0)
+    fd = [(wc.peak(uset.theta(z0 + 1e-6 * e), qv, us, p, amb)[0] - peak) / 1e-6 for e in np.eye(3)]
+    np.testing.assert_allclose(dz, fd, rtol=1e-3, atol=1e-4 * np.abs(dz).max())
+    worst = wc.search(qv, us, p, amb)
+    assert worst.certified and np.linalg.norm(worst.z) == pytest.approx(1.0, abs=1e-4)
+    drawn = [*uset.sample(np.random.default_rng(0), 200), *(uset.theta(z) for z in np.vstack([np.eye(3), -np.eye(3)]))]
+    assert worst.peak_c >= max(wc.peak(th, qv, us, p, amb)[0] for th in drawn) - 1e-9
+    idle_c, _ = wc.hottest_idle_c(amb)
+    assert idle_c >= max(float(wc.idle(th, amb, np.zeros(3))[0]) for th in drawn) - 1e-9

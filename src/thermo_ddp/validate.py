@@ -11,17 +11,21 @@ step).  The error is a predicted node minus its measurement at the grid's kept s
 
 The file's scope is reported too: the recordings against its ``[envelope]`` (:mod:`thermo_ddp.envelope`),
 the prediction of each ``[[alternatives]]``, and ``band_k``, the widest spread of the sensor's prediction
-that the ``[uncertainty]`` intervals and the alternatives allow.  The intervals enter to first order: at
-each sample the prediction's sensitivity J to each uncertain value (CasADi derivatives through the whole
-simulation) moves it by J (lo - x) and J (hi - x); the values' shifts are combined in quadrature, one side
-at a time (y - sqrt(sum of the squared downward shifts), y + sqrt(sum of the squared upward shifts)): the
-95 % interval of the prediction when the values' errors are independent (GUM, JCGM 100:2008 eq. 10), not
-the corner of the box where every value sits at its 95 % bound at once (probability 0.05^k: with a dozen
-fitted values that corner spread hundreds of kelvins on Paderborn profiles predicted within 2 K).  The
-alternatives' predictions widen that band; ``band_k`` is its largest width over every sample.  The file
-holds each value's interval, not their correlations: values whose errors compensate in the fit make the
-band too wide, values the data do not pin down (no interval) leave it too narrow where the recording lies
-outside the envelope.  First order is exact only for small intervals (the network is nonlinear in its
+that the ``[uncertainty]`` values and the alternatives allow.  The values enter to first order: at each
+sample the prediction's sensitivity g to the uncertain values (CasADi derivatives through the whole
+simulation; a share moved moves the first share of its split the other way, as in the fit).
+
+- With the fit's ``[covariance]`` C (of log(value) or value, as the intervals): the spread over the values'
+  joint 95 % confidence ellipsoid {d : d' C^-1 d <= chi2_{p,0.95}}, whose extremes along g are
+  +-sqrt(chi2_{p,0.95}) sqrt(g' C g) (p values): a band that holds at every sample at once (Scheffe), and
+  sees values that compensate each other (two resistances in series whose sum the data pin down).
+- Without it (files written before): each value's interval moves the prediction by g (lo - x) and
+  g (hi - x); the shifts are combined in quadrature, one side at a time (GUM, JCGM 100:2008 eq. 10: the
+  95 % interval of the prediction when the values' errors are independent; the report says so).
+
+The alternatives' predictions widen that band; ``band_k`` is its largest width over every sample.  Values
+the data do not pin down (no interval) are not in it: where the recording lies outside the envelope the
+error may be larger.  First order is exact only for small intervals (the network is nonlinear in its
 capacities and resistances): the band is an estimate, not a guarantee.
 """
 from __future__ import annotations
@@ -34,10 +38,12 @@ from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
+from scipy.stats import chi2
 
 from ._figures import new_figure
 from .envelope import TOLERANCE, EnvelopeCheck, check_envelope
 from .errors import InputError
+from .identify.network import values_of, with_values as with_network_values
 from .identify.thermal import load_joint_parameters
 from .identify.thermal_data import BOUNDARY_ROWS, INPUT_ROWS, ThermalGrid, ThermalSettings, thermal_grid
 from .model.parameters import JointParameters
@@ -118,6 +124,7 @@ class Validation:
     rows: dict = dataclasses.field(default_factory=dict)
     envelope: EnvelopeCheck = EnvelopeCheck((), False)
     alternatives: tuple[AlternativeScore, ...] = ()
+    band_basis: str = "none"   # how the values' uncertainty entered band_k: covariance | independent | none
 
     @property
     def success(self) -> bool:
@@ -162,7 +169,7 @@ class Validation:
         return {"success": True, "status": self.status, "message": self.message, **common, "rmse": self.rmse,
                 "max_abs_error": self.max_abs_error, "per_recording": [p.to_dict() for p in self.predictions],
                 "per_sensor": self.per_sensor, "alternatives": [a.to_dict() for a in self.alternatives],
-                "band_k": self.band_k}
+                "band_k": self.band_k, "band_basis": self.band_basis}
 
     def report(self) -> str:
         lines = [f"validate {self.model}: {self.status} ({self.message})"]
@@ -175,6 +182,8 @@ class Validation:
             lines += [f"alternative {'+'.join(a.terms)}: rmse {a.rmse:.3g} K" for a in self.alternatives]
             if self.band_k > 0:
                 lines.append(f"band: the file's uncertainty and alternatives allow predictions {self.band_k:.3g} K apart"
+                             + (" (the file has no [covariance]: the band assumes its values' errors independent)"
+                                if self.band_basis == "independent" else "")
                              + (" (outside the envelope: the values the identification could not pin down are not in "
                                 "it, the error may be larger)" if self.envelope.outside else ""))
         return "\n".join(lines)
@@ -216,9 +225,19 @@ class _Simulator:
     paths: tuple[str, ...]
 
 
+def _with_rest_shares(params: JointParameters, values: Mapping[str, object]) -> dict[str, object]:
+    """``values`` and, for a network whose split shares they move, each split's first share (unless moved
+    itself) as the rest (the fit's parametrisation: shares sum to 1, :func:`~thermo_ddp.identify.network.with_values`)."""
+    shares = {k: v for k, v in values.items() if ".split." in k}
+    if params.thermal.network is None or not shares:
+        return dict(values)
+    full = values_of(with_network_values(params.thermal.general, shares))
+    return dict(values) | {k: v for k, v in full.items() if ".split." in k and k not in values}
+
+
 def _simulator(params: JointParameters, paths: Sequence[str] = ()) -> _Simulator:
     p = ca.SX.sym("p", len(paths))
-    sym = params.with_values(dict(zip(paths, ca.vertsplit(p)))) if paths else params
+    sym = params.with_values(_with_rest_shares(params, dict(zip(paths, ca.vertsplit(p))))) if paths else params
     network = network_from_parameters(sym.thermal)
     temps = ca.SX.sym("temperatures_c", len(network.nodes))
     u = ca.SX.sym("inputs", len(INPUT_ROWS))
@@ -252,22 +271,33 @@ def _predict(sim: _Simulator, grid: ThermalGrid, measured: Mapping[str, np.ndarr
 
 def _band(params: JointParameters, sim: _Simulator, grid, measured, nominal: np.ndarray,
           others: Sequence[np.ndarray]) -> float:
-    """The widest spread of the sensor's prediction over this recording: first-order in the
-    ``[uncertainty]`` intervals combined in quadrature, widened by the alternatives' predictions ``others``
-    (module docstring)."""
+    """The widest spread of the sensor's prediction over this recording: first-order in the uncertain
+    values (:func:`_spread`), widened by the alternatives' predictions ``others`` (module docstring)."""
     lower, upper = nominal.copy(), nominal.copy()
     if sim.paths:
         p = ca.MX.sym("p", len(sim.paths))
         y = _states(sim, grid, measured, p)[sim.nodes.index(sim.sensor), :]
         x = np.array([params.value(k) for k in sim.paths])
         jac = np.asarray(ca.Function("sensitivity", [p], [ca.jacobian(y, p)])(x), float)
-        lo, hi = (np.array([params.scope.uncertainty[k][j] for k in sim.paths]) - x for j in (0, 1))
-        down, up = np.minimum(jac * lo, jac * hi), np.maximum(jac * lo, jac * hi)  # each value's one-sided shifts
-        lower -= np.sqrt(np.sum(np.minimum(down, 0.0) ** 2, axis=1))  # in quadrature (module docstring)
-        upper += np.sqrt(np.sum(np.maximum(up, 0.0) ** 2, axis=1))
+        down, up = _spread(params, sim.paths, x, jac)
+        lower, upper = lower - down, upper + up
     for other in others:
         lower, upper = np.minimum(lower, other), np.maximum(upper, other)
     return float(np.max(upper - lower))
+
+
+def _spread(params: JointParameters, paths: Sequence[str], x: np.ndarray, jac: np.ndarray):
+    """(downward, upward) first-order spread per sample of a prediction with sensitivity ``jac`` (samples x
+    values at ``paths``, at the file's values ``x``): over the [covariance]'s 95 % ellipsoid, or the
+    [uncertainty] intervals in quadrature (module docstring)."""
+    cov = params.scope.covariance
+    if cov is not None:  # the simulator's paths are the covariance's, in its order
+        g = jac * cov.value_jacobian(x)
+        half = math.sqrt(chi2.ppf(0.95, len(paths))) * np.sqrt(np.maximum(np.einsum("ti,ij,tj->t", g, cov.array, g), 0))
+        return half, half
+    lo, hi = (np.array([params.scope.uncertainty[k][j] for k in paths]) - x for j in (0, 1))
+    down, up = np.minimum(jac * lo, jac * hi), np.maximum(jac * lo, jac * hi)  # each value's one-sided shifts
+    return np.sqrt(np.sum(np.minimum(down, 0.0) ** 2, axis=1)), np.sqrt(np.sum(np.maximum(up, 0.0) ** 2, axis=1))
 
 
 def _prediction(params: JointParameters, rec: Recording, grid: ThermalGrid, sims: Sequence[_Simulator],
@@ -294,7 +324,8 @@ def validate_thermal(recordings, parameters: JointParameters | str | Path,
     recs = as_recordings(recordings, "validate")
     grid_settings = ThermalSettings(min_step_s=settings.grid_s, max_step_s=settings.grid_s, voltage_thermometry=False)
     grids = [thermal_grid(r, params, grid_settings) for r in recs]
-    sims = (_simulator(params), _simulator(params, tuple(params.scope.uncertainty)))
+    cov = params.scope.covariance
+    sims = (_simulator(params), _simulator(params, cov.paths if cov else tuple(params.scope.uncertainty)))
     alts = [_simulator(params.alternative(k)) for k in range(len(params.scope.alternatives))]
     results = [_prediction(params, r, g, sims, alts) for r, g in zip(recs, grids)]
     scores = tuple(AlternativeScore(a.terms, _rmse([others[k] - g.measured_c for (_, others), g in zip(results, grids)]))
@@ -302,7 +333,8 @@ def validate_thermal(recordings, parameters: JointParameters | str | Path,
     name = parameters if isinstance(parameters, (str, Path)) else params.path
     result = Validation(str(name), tuple(p for p, _ in results),
                         rows or {"used": sum(len(r) for r in recs), "skipped": 0, "segments": len(recs)},
-                        check_envelope(params.scope.envelope, recs, settings.envelope_tolerance), scores)
+                        check_envelope(params.scope.envelope, recs, settings.envelope_tolerance), scores,
+                        "covariance" if cov else "independent" if params.scope.uncertainty else "none")
     if not result.success:
         log.warning("%s: %s", result.model, result.message)
     return result

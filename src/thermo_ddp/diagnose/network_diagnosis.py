@@ -106,12 +106,15 @@ class NetworkDiagnosis(ThermalOutcome):
         return network_section(self.final.spec, self.params.thermal.ambient_c, self.final.sensor, room)
 
     def parameter_file(self) -> dict | None:
-        """The improved file: the grown network with [uncertainty], [envelope] and [[alternatives]]."""
+        """The improved file: the grown network with [uncertainty], [covariance], [envelope] and [[alternatives]]."""
         if not self.final.success:
             return None
         data = self.params.to_dict()
         data["thermal"] = self.network_section()
         data["uncertainty"] = self.final.uncertainty()
+        data.pop("covariance", None)
+        if self.final.covariance() is not None:
+            data["covariance"] = self.final.covariance().to_dict()
         data["envelope"] = {k: list(v) for k, v in self.envelope.items()}
         if self.alternatives:
             data["alternatives"] = [{"terms": a["terms"], **a["values"]} for a in self.alternatives]

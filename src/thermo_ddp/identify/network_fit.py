@@ -13,7 +13,9 @@ Initial state of each segment: every measured node at its first reading; every u
 equilibrium of its own equation with the measured nodes held there (the first inputs held).
 
 95 % intervals: s^2 (J^T J)^-1 of the weighted problem, inflated by sqrt(integrated autocorrelation
-time) of the residuals (output-error residuals are autocorrelated), log-normal for log-scaled values.
+time) of the residuals (output-error residuals are autocorrelated), log-normal for log-scaled values; that
+covariance (inflated, of log(value) or value) of the values with an interval, the others held at their fitted
+values (the inverse of the information matrix's block of those values), is the file's ``[covariance]``.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ import numpy as np
 from scipy import optimize
 
 from ..model.parameters import JointParameters
+from ..model.scope import Covariance
 from ..model.thermal import joint_heat_rhs
 from .fit_report import Z95, covariance, integrated_autocorrelation
 from ..model.network_spec import NetworkSpec
@@ -154,6 +157,7 @@ class NetworkFit:
     success: bool
     status: str
     message: str = ""
+    information: np.ndarray | None = None   # J^T J / (s^2 tau) of theta (the inverse of stderr^2's covariance)
 
     @property
     def values(self) -> dict[str, float]:
@@ -206,6 +210,18 @@ class NetworkFit:
         not pin down has none: its interval would be the range searched, and any band drawn from it (validate's
         ``band_k``) the spread of that range, not of what was learned (:meth:`undetermined` lists them)."""
         return {f.path: list(self.interval(f.path)) for f in self.free if self.pinned(f.path)}
+
+    def covariance(self) -> Covariance | None:
+        """The covariance of the values :meth:`uncertainty` gives intervals to, the values it gives none held at
+        the fitted ones (the file's ``[covariance]``: what validate and the planner vary, the others as written)."""
+        keep = [i for i, f in enumerate(self.free) if self.pinned(f.path)]
+        if self.information is None or not keep:
+            return None
+        block = self.information[np.ix_(keep, keep)]
+        d = np.sqrt(np.diag(block))
+        cov = np.linalg.pinv(block / np.outer(d, d), hermitian=True) / np.outer(d, d)
+        return Covariance.of([self.free[i].path for i in keep], ["log" if self.free[i].log else "linear" for i in keep],
+                             0.5 * (cov + cov.T))
 
     def undetermined(self) -> dict[str, tuple[float, float]]:
         """The fitted values the data do not pin down, with their 95 % intervals within the range searched."""
@@ -290,12 +306,14 @@ def _result(model: NetworkModel, grids, theta, weights, noise, sensors, ok, stat
     seen = [r / noise[node] for (g, node), r in residuals.items()
             if weights[[x.name for x in grids].index(g)]]
     tau = sum(r.size for r in seen) / sum(r.size / integrated_autocorrelation(r) for r in seen)
-    stderr = {}
+    stderr, info = {}, None
     if model.free:
         _, jac = _residuals(model, grids, theta, weights, noise, sensors)
-        cov, _ = covariance(jac, np.concatenate(seen))
+        r = np.concatenate(seen)
+        cov, _ = covariance(jac, r)
         stderr = {f.path: math.sqrt(tau * max(cov[i, i], 0.0)) for i, f in enumerate(model.free)}
+        info = jac.T @ jac / (tau * float(r @ r) / max(r.size - len(model.free), 1))
     finite = all(np.all(np.isfinite(r)) for r in residuals.values())
     return NetworkFit(spec, model.sensor, model.free, stderr, residuals, simulated, noise, tau, bool(ok and finite), status,
-                      str(message))
+                      str(message), info)
 

@@ -56,6 +56,7 @@ import numpy as np
 from scipy import optimize
 
 from .._config import require
+from ..model.scope import LEARNED_SECTIONS, Covariance
 from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
                                 packaged_parameter_file, parameters_from_dict, unit)
 from ..recordings import as_recordings
@@ -70,6 +71,7 @@ THERMAL_TERMS = ("friction_heating", "drive_heating", "casing_node", "copper_res
 IRON_KEY = "iron_loss_w_s2_per_rad2"
 # The iron_losses term k v^2 is the contract's iron loss at 1 rad/s with exponent 2: iron_loss_w = k.
 _IRON_CONTRACT = {"iron_loss_ref_speed_rad_s": 1.0, "iron_loss_speed_exponent": 2.0}
+_PATHS = {"copper_alpha_per_k": "motor.copper_alpha_per_k", IRON_KEY: "thermal.iron_loss_w"}  # fitted key -> file path
 
 FRICTION_KEYS = ("friction_heat_linear_w_s_per_rad", "friction_heat_quadratic_w_s2_per_rad2")
 SENSOR_DRIVE_KEYS = ("drive_idle_w", "drive_loss_w_per_a2")
@@ -568,16 +570,20 @@ def identify_thermal(recordings, model: str = "one_node", *, terms: Sequence[str
 
 def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequence[str] = (),
                    envelope: Mapping[str, Sequence[float]] | None = None) -> dict:
-    """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict);
-    ``iron_losses`` k v^2 is written as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2);
-    [uncertainty]: the 95 % interval of every fitted value by its dotted path; [envelope]: ``envelope``
-    (the file's own [uncertainty], [envelope] and [[alternatives]] described the values it had)."""
-    data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
+    """The contract parameter sections with ``fit``'s thermal model (validated by parameters_from_dict); ``iron_losses``
+    k v^2 as the contract's iron loss (``iron_loss_w`` = k at 1 rad/s, exponent 2); the fitted values' [uncertainty]
+    (95 %), [covariance] (of log(value) for log-normal intervals) and ``envelope`` replace the file's own."""
+    data = {k: v for k, v in params.to_dict().items() if k not in LEARNED_SECTIONS}
     values = dict(fit.parameters)  # each interval within the range searched (not 1e-303 to 1e305 K/W)
-    finite = {_path(k): [min(max(lo, _SEARCH[k][1], 0.0), values[k]), max(min(hi, _SEARCH[k][2]), values[k])]
+    finite = {k: [min(max(lo, _SEARCH[k][1], 0.0), values[k]), max(min(hi, _SEARCH[k][2]), values[k])]
               for k, (lo, hi) in fit.confidence.items() if math.isfinite(hi - lo)}
     if finite:  # a value the data do not pin down has no finite interval: not written
-        data["uncertainty"] = finite
+        keys, paths = list(finite), [_PATHS.get(k, f"thermal.{k}") for k in finite]
+        data["uncertainty"] = dict(zip(paths, finite.values()))
+        log = [_SEARCH[k][0] == "log" and values[k] > 0 for k in keys]  # as ThermalFit.confidence
+        cov = Covariance.of_errors(paths, log, [values[k] for k in keys], [fit.stderr[k] for k in keys],
+                                   [[fit.correlation[a][b] for b in keys] for a in keys])
+        data |= {"covariance": cov.to_dict()} if cov else {}
     if envelope:
         data["envelope"] = {k: list(v) for k, v in envelope.items()}
     model = network_model(fit.terms)
@@ -589,12 +595,7 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
     if IRON_KEY in values:
         identified += ["iron_loss_w", *_IRON_CONTRACT]
     where = ", ".join(recordings) or "recordings"
-    data["sources"] = {k: v for k, v in data["sources"].items() if k not in identified}
-    for key in identified:
-        data["sources"][key] = f"identified by thermo-ddp ({fit.model}, output-error least squares) from {where}"
+    data["sources"] = {k: v for k, v in data["sources"].items() if k not in identified} | dict.fromkeys(
+        identified, f"identified by thermo-ddp ({fit.model}, output-error least squares) from {where}")
     return parameters_from_dict(data, f"identified from {where}").to_dict()
 
-
-def _path(key: str) -> str:
-    """The dotted path of a fitted key in the file it is written to."""
-    return {"copper_alpha_per_k": "motor.copper_alpha_per_k", IRON_KEY: "thermal.iron_loss_w"}.get(key, f"thermal.{key}")

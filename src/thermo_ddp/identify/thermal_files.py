@@ -5,7 +5,8 @@ A legacy file whose network measures only the recording's ``temperature_c`` is f
 recordings with further sensors that are nodes of the file's network, by
 :func:`~thermo_ddp.identify.network_fit.fit_network` on the file's network, every sensor at once (a sensor the
 network has no node for is left out and named: ``diagnose`` adds such nodes).  The file written carries
-``[uncertainty]`` (95 % interval of every fitted value) and ``[envelope]`` (what the recordings cover).
+``[uncertainty]`` (95 % interval of every fitted value), ``[covariance]`` (their joint uncertainty) and
+``[envelope]`` (what the recordings cover).
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from typing import Sequence
 
 from ..envelope import envelope_of
 from ..model.parameters import JointParameters, ThermalParameters
+from ..model.scope import LEARNED_SECTIONS
 from ..recordings import read_recordings
 from .network_fit import Free, fit_network
 from .network import free_paths
@@ -43,10 +45,12 @@ def identify_network_files(params: JointParameters, recordings, settings: Therma
     spec = params.thermal.general
     fit = fit_network(params, spec, params.thermal.sensor_node, tuple(_free(p) for p in free_paths(spec)), grids)
     unused = sorted({n for g in grids for n in g.sensors} - set(spec.node_names))
-    data = {k: v for k, v in params.to_dict().items() if k not in ("uncertainty", "envelope", "alternatives")}
+    data = {k: v for k, v in params.to_dict().items() if k not in LEARNED_SECTIONS}
     data |= {"thermal": ThermalParameters("network", params.thermal.ambient_c, {}, fit.sensor, network=fit.spec,
                                          room_c=params.thermal.room_c).to_dict(),
              "uncertainty": fit.uncertainty(), "envelope": {k: list(v) for k, v in envelope_of(recordings).items()}}
+    if fit.covariance() is not None:
+        data["covariance"] = fit.covariance().to_dict()
     message = fit.message + (f"; sensors without a node in the network, not fitted: {', '.join(unused)} "
                              "(thermo-ddp diagnose adds them)" if unused else "")
     return {"physics": "thermal", "recordings": [g.name for g in grids], "model": "network",

@@ -17,7 +17,7 @@ from ..errors import InputError
 from .catalogue import (BOUNDS, HEAT_SOURCE_KINDS, NETWORK_MODEL, SOURCE_KINDS, THERMAL_KEYS, THERMAL_MODELS,  # noqa: F401
                         THERMAL_NODE_CHOICES, THERMAL_OPTIONAL, Bound, checked_value, unit)
 from .network_spec import NetworkSpec, general_network, read_network
-from .scope import Scope, read_alternatives, read_envelope, read_hardware, read_uncertainty
+from .scope import Scope, read_alternatives, read_covariance, read_envelope, read_hardware, read_uncertainty
 
 @dataclass(frozen=True)
 class MotorParameters:
@@ -179,8 +179,8 @@ class JointParameters:
         return dataclasses.replace(parameters_from_dict(self.to_dict(), source or self.path), path=self.path)
 
     def with_scope(self, **sections) -> "JointParameters":
-        """A copy with sections of its :class:`Scope` replaced (``heat_sources``, ``uncertainty``, ``envelope``,
-        ``alternatives``: what identify and diagnose write), validated as if read."""
+        """A copy with sections of its :class:`Scope` replaced (``heat_sources``, ``uncertainty``, ``covariance``,
+        ``envelope``, ``alternatives``: what identify and diagnose write), validated as if read."""
         return dataclasses.replace(self, scope=dataclasses.replace(self.scope, **sections)).checked()
 
     def alternative(self, index: int) -> "JointParameters":
@@ -190,11 +190,15 @@ class JointParameters:
 
     def replace(self, section: str, **values: float) -> "JointParameters":
         """A copy with some values of ``motor``, ``thermal`` or ``limits`` replaced (validated); a replaced
-        value's [uncertainty] interval described the value it replaces and is dropped."""
+        value's [uncertainty] interval (and its [covariance] row) described the value it replaces and is dropped."""
         data = self.to_dict()
         if "uncertainty" in data:
             data["uncertainty"] = {k: v for k, v in data["uncertainty"].items()
                                    if k not in {f"{section}.{key}" for key in values}}
+            kept = self.scope.covariance and self.scope.covariance.restricted(data["uncertainty"])
+            data.pop("covariance", None)
+            if kept:
+                data["covariance"] = kept.to_dict()
         known = set(data[section]) | (set(THERMAL_OPTIONAL) | set(THERMAL_NODE_CHOICES) if section == "thermal" else set())
         unknown = sorted(set(values) - known)
         if unknown:
@@ -301,8 +305,9 @@ def _scope(source: str, data: Mapping[str, Any], core: JointParameters) -> Scope
             raise InputError(source, where, err.args[0], "names no value this file can hold") from None
         candidate.checked(f"{source} {where}")
 
-    return Scope(hardware, read_uncertainty(source, data, core.value), read_envelope(source, data),
-                 read_alternatives(source, data, check))
+    uncertainty = read_uncertainty(source, data, core.value)
+    return Scope(hardware, uncertainty, read_envelope(source, data), read_alternatives(source, data, check),
+                 read_covariance(source, data, uncertainty, core.value))
 
 
 def parameters_from_dict(data: Mapping[str, Any], source: str = "<memory>") -> JointParameters:

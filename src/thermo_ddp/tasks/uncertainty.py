@@ -3,25 +3,32 @@
 - :class:`UncertaintySet`: the box of the uncertain values, by dotted path (``thermal.casing_ambient_k_per_w``,
   ``motor.resistance_ohm``): every thermal capacity and resistance of the file's model, the winding
   resistance and the drive's losses, each within +-``fraction`` of the file's value; or the intervals of
-  the file's ``[uncertainty]`` section (95 % intervals written by identify/diagnose).
+  the file's ``[uncertainty]`` section (95 % intervals written by identify/diagnose).  A file that also has
+  the fit's ``[covariance]`` gives its 95 % confidence ellipsoid instead: theta = file value x exp(A z) (log-
+  scaled values; + A z for linear ones) with |z| <= 1, A = sqrt(chi2_{d,0.95}) V diag(sqrt(lambda)) from
+  C = V diag(lambda) V^T, so z = +-e_k are the ends of its principal axes (the box's corners would be
+  motors the fit excludes: two resistances in series whose sum the data pin down both at their upper bound).
 - :func:`scenario_step`: one scenario's step ``(x, u, p, theta) -> x_next`` of the elbow with the uncertain
   values ``theta`` as a runtime input (the multi-model problem's dynamics); at the file's values it is the
   model's own step.
 - :class:`WorstCase`: the replay of a plan (its current and motion) through the scenario model, exactly
-  as the planner's constraint sees it, and the motor of the set with the highest winding peak: projected
-  gradient ascent (L-BFGS-B) from the vertex the gradient at the file's values points to and from a few
-  more vertices. Every motor starts from its own equilibrium at rest, from given temperatures, or with its
+  as the planner's constraint sees it, and the motor of the set with the highest winding peak: gradient
+  ascent in the set (L-BFGS-B on the box, SLSQP in the ellipsoid's ball) from the point the gradient at the
+  file's values points to (a vertex; the ellipsoid's first-order worst point) and from a few more. Every
+  motor starts from its own equilibrium at rest, from given temperatures, or with its
   measured nodes (the casing sensor) at given temperatures and the others at its equilibrium given them.
 """
 from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
+from scipy.stats import chi2
 
 from .._config import require
 from ..model.actuated import ActuatedArm
@@ -51,14 +58,17 @@ def value_of(params: JointParameters, key: str) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class UncertaintySet:
-    """The box ``low <= theta <= high`` of the values ``keys`` around the file's ``nominal``; ``label``
-    says where it comes from (``+-20 %`` or the file's ``[uncertainty]``)."""
+    """The values ``keys`` around the file's ``nominal``: the box ``low <= theta <= high``, or (``axes`` given)
+    the ellipsoid theta(z), |z| <= 1 (module docstring; ``low``, ``high``: its bounding box); ``label`` says
+    where it comes from (``+-20 %``, the file's ``[uncertainty]`` or its ``[covariance]``)."""
 
     keys: tuple[str, ...]
     nominal: np.ndarray
     low: np.ndarray
     high: np.ndarray
     label: str
+    axes: np.ndarray | None = None   # A (values x axes): the principal axes, columns, in log(value) or value
+    log: tuple[bool, ...] = ()       # per value: A acts on log(value)
 
     @classmethod
     def from_fraction(cls, params: JointParameters, fraction: float) -> "UncertaintySet":
@@ -69,40 +79,130 @@ class UncertaintySet:
     @classmethod
     def from_file(cls, params: JointParameters, path: str | Path) -> "UncertaintySet":
         """The file's ``[uncertainty]`` intervals (dotted paths of the file's values; read and checked, each
-        containing the file's value, when the file was loaded)."""
+        containing the file's value, when the file was loaded), or its ``[covariance]``'s 95 % ellipsoid."""
         intervals = params.scope.uncertainty
         require(len(intervals) > 0, str(path), "[uncertainty]", "<missing>",
                 "no intervals: give --uncertainty FRACTION, or identify the motor to write them")
+        cov = params.scope.covariance
+        if cov is not None:
+            return cls.ellipsoid(params, cov)
         keys = tuple(intervals)
         low, high = (np.array([intervals[k][i] for k in keys], float) for i in (0, 1))
         nominal = np.array([value_of(params, k) for k in keys])
         return cls(keys, nominal, low, high, "the file's [uncertainty]")
 
+    @classmethod
+    def ellipsoid(cls, params: JointParameters, cov) -> "UncertaintySet":
+        """The 95 % confidence ellipsoid of a :class:`~thermo_ddp.model.scope.Covariance` (module docstring)."""
+        lam, vec = np.linalg.eigh(cov.array)
+        axes = math.sqrt(chi2.ppf(0.95, len(cov.paths))) * vec * np.sqrt(np.maximum(lam, 0.0))
+        log = tuple(s == "log" for s in cov.scale)
+        nominal = np.array([value_of(params, k) for k in cov.paths])
+        reach = np.sqrt(np.sum(axes ** 2, axis=1))
+        low, high = (np.where(log, nominal * np.exp(sign * reach), nominal + sign * reach) for sign in (-1, 1))
+        return cls(cov.paths, nominal, low, high, "the file's [covariance] (95 % ellipsoid)", axes, log)
+
     @property
     def size(self) -> int:
         return len(self.keys)
 
+    @property
+    def is_ellipsoid(self) -> bool:
+        return self.axes is not None
+
     def theta(self, z) -> np.ndarray:
-        """The values at normalised coordinates ``z`` in [-1, 1]^d (the box's corners at +-1)."""
-        return 0.5 * (self.low + self.high) + 0.5 * (self.high - self.low) * np.asarray(z, float)
+        """The values at normalised coordinates ``z``: in [-1, 1]^d (the box's corners at +-1), or |z| <= 1
+        (the ellipsoid's principal axes' ends at +-e_k)."""
+        z = np.asarray(z, float)
+        if self.is_ellipsoid:
+            step = self.axes @ z
+            return np.where(self.log, self.nominal * np.exp(step), self.nominal + step)
+        return 0.5 * (self.low + self.high) + 0.5 * (self.high - self.low) * z
+
+    def dtheta_dz(self, z) -> np.ndarray:
+        """d theta / d z (values x d)."""
+        if self.is_ellipsoid:
+            return np.where(self.log, self.theta(z), 1.0)[:, None] * self.axes
+        return np.diag(0.5 * (self.high - self.low))
 
     def z(self, theta) -> np.ndarray:
+        theta = np.asarray(theta, float)
+        if self.is_ellipsoid:
+            step = np.where(self.log, np.log(np.maximum(theta, 1e-300) / self.nominal), theta - self.nominal)
+            return np.linalg.lstsq(self.axes, step, rcond=None)[0]
         half = 0.5 * (self.high - self.low)
-        return np.divide(np.asarray(theta, float) - 0.5 * (self.low + self.high), half, out=np.zeros(self.size),
-                         where=half > 0)
+        return np.divide(theta - 0.5 * (self.low + self.high), half, out=np.zeros(self.size), where=half > 0)
 
     def sample(self, rng: np.random.Generator, count: int) -> np.ndarray:
-        """``count`` motors drawn uniformly in the box, (count, d)."""
+        """``count`` motors drawn uniformly in the box, or in the ellipsoid's ball of z, (count, d)."""
+        if self.is_ellipsoid:
+            z = self.boundary_points(rng, count) * rng.random((count, 1)) ** (1 / self.size)
+            return np.array([self.theta(row) for row in z])
         return self.low + (self.high - self.low) * rng.random((count, self.size))
+
+    def maximise(self, negative, starts, maxiter: int | None = None):
+        """The best of local maximisations of a function in the set (``negative(z)`` -> (-f, -df/dz)) from
+        ``starts``: L-BFGS-B on the box, SLSQP with |z|^2 <= 1 in the ellipsoid's ball."""
+        if self.is_ellipsoid:
+            ball = {"type": "ineq", "fun": lambda z: 1.0 - z @ z, "jac": lambda z: -2.0 * z}
+            runs = (minimize(negative, z, jac=True, method="SLSQP", constraints=[ball],
+                             options={"maxiter": maxiter or 100}) for z in starts)
+        else:
+            runs = (minimize(negative, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.size,
+                             options={"maxiter": maxiter or 15000}) for z in starts)
+        return min(runs, key=lambda r: r.fun)
+
+    def project(self, z) -> np.ndarray:
+        z = np.asarray(z, float)
+        return z / max(1.0, float(np.linalg.norm(z))) if self.is_ellipsoid else np.clip(z, -1, 1)
+
+    def first_order_worst(self, grad) -> np.ndarray:
+        """The point of the set where the linearisation ``grad`` (of f by z) is largest: a vertex of the box,
+        grad / |grad| on the ellipsoid's sphere."""
+        grad = np.asarray(grad, float)
+        if self.is_ellipsoid:
+            return grad / max(float(np.linalg.norm(grad)), 1e-300)
+        return np.where(grad >= 0, 1.0, -1.0)
+
+    def neighbour(self, grad) -> np.ndarray:
+        """A second start beside :meth:`first_order_worst`: the vertex with the smallest gradient component
+        flipped, or the end of the ellipsoid's principal axis the gradient leans on most."""
+        grad = np.asarray(grad, float)
+        if self.is_ellipsoid:
+            k = int(np.argmax(np.abs(grad)))
+            return np.where(np.arange(self.size) == k, 1.0 if grad[k] >= 0 else -1.0, 0.0)
+        out = self.first_order_worst(grad)
+        out[np.argmin(np.abs(grad))] *= -1
+        return out
+
+    def boundary_points(self, rng: np.random.Generator, count: int) -> np.ndarray:
+        """``count`` random points of z on the set's boundary: box vertices, or points of the ball's sphere."""
+        if self.is_ellipsoid:
+            direction = rng.standard_normal((count, self.size))
+            return direction / np.linalg.norm(direction, axis=1)[:, None]
+        return rng.choice([-1.0, 1.0], size=(count, self.size))
+
+    def certified(self, z, grad) -> bool:
+        """KKT of a maximum of f at ``z`` with gradient ``grad``: on the box, pointing out of every bound z
+        sits on and vanishing elsewhere; in the ball, along +z on its sphere, vanishing inside."""
+        scale = max(1e-9, float(np.abs(grad).max()))
+        if self.is_ellipsoid:
+            if abs(float(np.linalg.norm(z)) - 1.0) > 1e-4:
+                return bool(np.abs(grad).max() <= 1e-3 * scale)
+            return bool(grad @ z >= 0 and np.abs(grad - (grad @ z) * z).max() <= 1e-3 * scale)
+        at_bound = np.abs(np.abs(z) - 1) < 1e-6
+        return bool(np.all(np.where(at_bound, grad * z >= -1e-6 * scale, np.abs(grad) <= 1e-3 * scale)))
 
     def parameters(self, params: JointParameters, theta) -> JointParameters:
         """The parameter file with the values ``theta`` (validated like a file)."""
         values = dict(zip(self.keys, np.asarray(theta, float).tolist()))
         motor = params.with_values(values)  # one motor of the set: the file's own intervals no longer apply
-        return dataclasses.replace(motor, scope=dataclasses.replace(motor.scope, uncertainty={})).checked()
+        scope = dataclasses.replace(motor.scope, uncertainty={}, covariance=None)
+        return dataclasses.replace(motor, scope=scope).checked()
 
     def to_dict(self) -> dict:
-        return {"set": self.label, "keys": list(self.keys), "low": self.low.tolist(), "high": self.high.tolist()}
+        out = {"set": self.label, "keys": list(self.keys), "low": self.low.tolist(), "high": self.high.tolist()}
+        return out | ({"axes": self.axes.tolist()} if self.is_ellipsoid else {})
 
 
 def check_fraction(fraction) -> float:
@@ -250,51 +350,40 @@ class WorstCase:
 
     def search(self, qv, us, params, ambient_c: float, rng_seed: int = 0, start_c=None,
                starts: int = _STARTS) -> WorstMotor:
-        """The motor with the highest winding peak: L-BFGS-B on the box (normalised) from the vertex the
-        gradient at the file's values points to, its neighbour with the smallest gradient component
-        flipped, and random vertices (``starts`` in all); the best end point, certified when its gradient
-        points out of the box at every bound it sits on and vanishes elsewhere."""
+        """The motor with the highest winding peak: ascent in the set (:meth:`UncertaintySet.maximise`, z
+        normalised) from the point the gradient at the file's values points to (a box vertex, or the
+        ellipsoid's first-order worst point), its :meth:`UncertaintySet.neighbour` and random points of the
+        set's boundary (``starts`` in all); the best end point, certified when the
+        gradient there satisfies the set's KKT conditions (:meth:`UncertaintySet.certified`)."""
         calls = [0]
+        uset = self.uset
 
         def negative_peak(z):
             calls[0] += 1
-            peak, grad = self.peak(self.uset.theta(z), qv, us, params, ambient_c, start_c)
-            return -peak, -grad * 0.5 * (self.uset.high - self.uset.low)
+            peak, grad = self.peak(uset.theta(z), qv, us, params, ambient_c, start_c)
+            return -peak, -grad @ uset.dtheta_dz(z)
 
-        z0 = self.uset.z(self.uset.nominal)
-        g0 = -negative_peak(z0)[1]
-        first = np.where(g0 >= 0, 1.0, -1.0)
-        flipped = first.copy()
-        flipped[np.argmin(np.abs(g0))] *= -1
-        rng = np.random.default_rng(rng_seed)
-        vertices = [first, flipped, *rng.choice([-1.0, 1.0], size=(max(starts - 2, 0), self.uset.size))][:starts]
-        best = None
-        for z in vertices:
-            res = minimize(negative_peak, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.uset.size,
-                           options={"maxiter": 30})
-            if best is None or res.fun < best.fun:
-                best = res
-        z = np.clip(best.x, -1, 1)
+        g0 = -negative_peak(uset.z(uset.nominal))[1]
+        others = uset.boundary_points(np.random.default_rng(rng_seed), max(starts - 2, 0))
+        best = uset.maximise(negative_peak, [uset.first_order_worst(g0), uset.neighbour(g0), *others][:starts],
+                             maxiter=30)
+        z = uset.project(best.x)
         grad = -negative_peak(z)[1]
-        scale = max(1e-9, np.abs(grad).max())
-        at_bound = np.abs(np.abs(z) - 1) < 1e-6
-        certified = bool(np.all(np.where(at_bound, grad * z >= -1e-6 * scale, np.abs(grad) <= 1e-3 * scale)))
-        return WorstMotor(self.uset.theta(z), float(-best.fun), z, certified, calls[0])
+        return WorstMotor(uset.theta(z), float(-best.fun), z, uset.certified(z, grad), calls[0])
 
     def hottest_idle_c(self, ambient_c: float) -> tuple[float, np.ndarray]:
         """The highest idle winding temperature of the set and its motor (the idle network is linear in
-        the heat, so the search is the same ascent on the box)."""
+        the heat, so the search is the same ascent in the set)."""
         iw = self.iw - 2 * self.model.nu
         th = ca.SX.sym("theta", self.uset.size)
         w = self.idle(th, ambient_c, ca.DM.zeros(self.start_c.size))[iw]
         f = ca.Function("idle_winding", [th], [w, ca.gradient(w, th)])
-        half = 0.5 * (self.uset.high - self.uset.low)
+        uset = self.uset
 
         def negative(z):
-            value, grad = f(self.uset.theta(z))
-            return -float(value), -np.array(grad).ravel() * half
+            value, grad = f(uset.theta(z))
+            return -float(value), -np.array(grad).ravel() @ uset.dtheta_dz(z)
 
-        starts = [np.where(-negative(self.uset.z(self.uset.nominal))[1] >= 0, 1.0, -1.0), self.uset.z(self.uset.nominal)]
-        best = min((minimize(negative, z, jac=True, method="L-BFGS-B", bounds=[(-1, 1)] * self.uset.size)
-                    for z in starts), key=lambda r: r.fun)
-        return -float(best.fun), self.uset.theta(best.x)
+        z0 = uset.z(uset.nominal)
+        best = uset.maximise(negative, [uset.first_order_worst(-negative(z0)[1]), z0])
+        return -float(best.fun), uset.theta(uset.project(best.x))
