@@ -5,8 +5,8 @@
   resistance and the drive's losses, each within +-``fraction`` of the file's value; or the intervals of
   the file's ``[uncertainty]`` section (95 % intervals written by identify/diagnose).  A file that also has
   the fit's ``[covariance]`` gives its 95 % confidence ellipsoid instead: theta = file value x exp(A z) (log-
-  scaled values; + A z for linear ones) with |z| <= 1, A = sqrt(chi2_{d,0.95}) V diag(sqrt(lambda)) from
-  C = V diag(lambda) V^T, so z = +-e_k are the ends of its principal axes (the box's corners would be
+  scaled values; + A z for linear ones, floored at 0) with |z| <= 1, A = sqrt(chi2_{d,0.95}) V diag(sqrt(
+  lambda)) from C = V diag(lambda) V^T, so z = +-e_k are the ends of its principal axes (the box's corners would be
   motors the fit excludes: two resistances in series whose sum the data pin down both at their upper bound).
 - :func:`scenario_step`: one scenario's step ``(x, u, p, theta) -> x_next`` of the elbow with the uncertain
   values ``theta`` as a runtime input (the multi-model problem's dynamics); at the file's values it is the
@@ -99,7 +99,8 @@ class UncertaintySet:
         log = tuple(s == "log" for s in cov.scale)
         nominal = np.array([value_of(params, k) for k in cov.paths])
         reach = np.sqrt(np.sum(axes ** 2, axis=1))
-        low, high = (np.where(log, nominal * np.exp(sign * reach), nominal + sign * reach) for sign in (-1, 1))
+        low, high = (np.where(log, nominal * np.exp(sign * reach), np.maximum(nominal + sign * reach, 0.0))
+                     for sign in (-1, 1))
         return cls(cov.paths, nominal, low, high, "the file's [covariance] (95 % ellipsoid)", axes, log)
 
     @property
@@ -114,15 +115,16 @@ class UncertaintySet:
         """The values at normalised coordinates ``z``: in [-1, 1]^d (the box's corners at +-1), or |z| <= 1
         (the ellipsoid's principal axes' ends at +-e_k)."""
         z = np.asarray(z, float)
-        if self.is_ellipsoid:
+        if self.is_ellipsoid:  # a linear value's ellipsoid may cross 0: no motor has a negative one
             step = self.axes @ z
-            return np.where(self.log, self.nominal * np.exp(step), self.nominal + step)
+            return np.where(self.log, self.nominal * np.exp(step), np.maximum(self.nominal + step, 0.0))
         return 0.5 * (self.low + self.high) + 0.5 * (self.high - self.low) * z
 
     def dtheta_dz(self, z) -> np.ndarray:
-        """d theta / d z (values x d)."""
+        """d theta / d z (values x d; a linear value held at 0 has a zero row)."""
         if self.is_ellipsoid:
-            return np.where(self.log, self.theta(z), 1.0)[:, None] * self.axes
+            theta = self.theta(z)
+            return np.where(self.log, theta, theta > 0.0)[:, None] * self.axes
         return np.diag(0.5 * (self.high - self.low))
 
     def z(self, theta) -> np.ndarray:
