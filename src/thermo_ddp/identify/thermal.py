@@ -56,9 +56,9 @@ import numpy as np
 from scipy import optimize
 
 from .._config import require
-from ..model.scope import LEARNED_SECTIONS, Covariance
 from ..model.parameters import (THERMAL_KEYS, THERMAL_MODELS, JointParameters, ThermalParameters, load_parameters,
                                 packaged_parameter_file, parameters_from_dict, unit)
+from ..model.scope import LEARNED_SECTIONS, Covariance
 from ..recordings import as_recordings
 from ..model.thermal import joint_heat_rhs, network_from_parameters
 from .fit_report import Z95, FitResult, correlation, covariance, integrated_autocorrelation
@@ -584,8 +584,7 @@ def parameter_file(params: JointParameters, fit: ThermalFit, recordings: Sequenc
         cov = Covariance.of_errors(paths, log, [values[k] for k in keys], [fit.stderr[k] for k in keys],
                                    [[fit.correlation[a][b] for b in keys] for a in keys])
         data |= {"covariance": cov.to_dict()} if cov else {}
-    if envelope:
-        data["envelope"] = {k: list(v) for k, v in envelope.items()}
+    data |= {"envelope": {k: list(v) for k, v in envelope.items()}} if envelope else {}
     model = network_model(fit.terms)
     data["thermal"] = structure_parameters(params.thermal, model, values).to_dict()
     if "copper_alpha_per_k" in values:
