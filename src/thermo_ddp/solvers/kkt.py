@@ -88,18 +88,24 @@ class KKTEvaluator:
         """The least-squares multipliers of the dynamics (N+1, nx; row 0 unused: x_0 is fixed) at the trajectory
         with inequality multipliers mu (N, ng), muN (ngN): argmin over lam_1..lam_N of the stationarity rows'
         Euclidean norm, the rows of controls at a bound left out."""
+        return self._fitted(xs, us, params, mu, muN)[0]
+
+    def _fitted(self, xs, us, params, mu, muN):
+        """(:meth:`costates`, the stage rows (Lx, Lu, g, gaps) at them): the rows are affine in the costates, so
+        one evaluation of the knots at lam = 0 and of the Jacobians gives both."""
         pr, N = self.problem, len(us)
         nx, nu = pr.nx, pr.nu
         stage, jacobians = self._mapped(N)
-        zero = np.zeros((nx, N))
-        Lx, Lu = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, zero, xs[1:].T)[:2])
+        Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, np.zeros((nx, N)),
+                                                        xs[1:].T))
         At, Bt = (np.asarray(v).T.reshape(N, n, nx) for v, n in zip(jacobians(xs[:-1].T, us.T, params[:-1].T),
                                                                     (nx, nu)))
         LxN = np.asarray(self._terminal(xs[N], params[N], muN)[0]).ravel()
         free = ~_at_bound(us, pr.u_lb, pr.u_ub)
         M, b = _stationarity_system(At, Bt, free, np.concatenate([(Lu * free).ravel(), Lx[1:].ravel(), LxN]))
-        lam = spla.spsolve((M.T @ M).tocsc(), -(M.T @ b))
-        return np.vstack([np.zeros(nx), np.asarray(lam).reshape(N, nx)])
+        lam = np.asarray(spla.spsolve((M.T @ M).tocsc(), -(M.T @ b))).reshape(N, nx)
+        rows = (Lx + np.einsum("kij,kj->ki", At, lam), Lu + np.einsum("kij,kj->ki", Bt, lam), G, C)
+        return np.vstack([np.zeros(nx), lam]), rows
 
     def residuals(self, xs, us, params, mu, muN, x0, costates=None, bound_multipliers=None) -> dict[str, float]:
         """The KKT residuals at the trajectory from ``x0``; ``costates`` (N+1, nx) and ``bound_multipliers``
@@ -109,10 +115,11 @@ class KKTEvaluator:
         mu = np.asarray(mu, dtype=float).reshape(len(us), pr.n_constraints)
         muN = np.asarray(muN, dtype=float).ravel()
         if costates is None:
-            costates = self.costates(xs, us, params, mu, muN)
-        stage, _ = self._mapped(len(us))
-        Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
-                                                        xs[1:].T))
+            costates, (Lx, Lu, G, C) = self._fitted(xs, us, params, mu, muN)
+        else:
+            stage, _ = self._mapped(len(us))
+            Lx, Lu, G, C = (np.asarray(v).T for v in stage(xs[:-1].T, us.T, params[:-1].T, mu.T, costates[1:].T,
+                                                            xs[1:].T))
         LxN, GN = (np.asarray(v).ravel() for v in self._terminal(xs[-1], params[-1], muN))
         lb, ub = np.broadcast_to(pr.u_lb, us.shape), np.broadcast_to(pr.u_ub, us.shape)
         z = _projected_bound_multipliers(Lu, us, lb, ub) if bound_multipliers is None else bound_multipliers
