@@ -398,8 +398,9 @@ def _write(args, n, rows):
         "ddp_solves_max": max((p["solves"] for p in plans), default=None),
         "ddp_wall_s_total": float(sum(p["wall_s"] for p in plans)),
         "ipopt_wall_s_total": float(sum(p["wall_s"] for p in ipopt))}
-    write("planner_verdicts_chosen" if getattr(args, "request", None) else "planner_verdicts", {"summary": summary, "disagreements": [r for r in rows if r["comparison"] == "disagree"],
-                               "rows": rows})
+    name = "planner_verdicts_chosen" if getattr(args, "request", None) else "planner_verdicts"
+    write(name, {"summary": summary, "disagreements": [r for r in rows if r["comparison"] == "disagree"],
+                 "rows": rows})
     print({k: v for k, v in summary.items() if k not in ("ddp_ladder",)}, flush=True)
 
 
