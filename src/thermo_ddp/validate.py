@@ -38,7 +38,6 @@ from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
-from scipy.stats import chi2
 
 from ._figures import new_figure
 from .envelope import TOLERANCE, EnvelopeCheck, check_envelope
@@ -293,7 +292,7 @@ def _spread(params: JointParameters, paths: Sequence[str], x: np.ndarray, jac: n
     cov = params.scope.covariance
     if cov is not None:  # the simulator's paths are the covariance's, in its order
         g = jac * cov.value_jacobian(x)
-        half = math.sqrt(chi2.ppf(0.95, len(paths))) * np.sqrt(np.maximum(np.einsum("ti,ij,tj->t", g, cov.array, g), 0))
+        half = cov.radius_95 * np.sqrt(np.maximum(np.einsum("ti,ij,tj->t", g, cov.array, g), 0))
         return half, half
     lo, hi = (np.array([params.scope.uncertainty[k][j] for k in paths]) - x for j in (0, 1))
     down, up = np.minimum(jac * lo, jac * hi), np.maximum(jac * lo, jac * hi)  # each value's one-sided shifts

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 import numpy as np
+from scipy.stats import chi2
 
 from ..errors import InputError
 from .catalogue import ENVELOPE_QUANTITIES, HEAT_SOURCE_KINDS
@@ -83,6 +84,11 @@ class Covariance:
     @property
     def array(self) -> np.ndarray:
         return np.array(self.matrix, float).reshape(len(self.paths), len(self.paths))
+
+    @property
+    def radius_95(self) -> float:
+        """The 95 % confidence ellipsoid's radius in standard deviations: sqrt(chi2_{p,0.95}), p values."""
+        return math.sqrt(chi2.ppf(0.95, len(self.paths)))
 
     def value_jacobian(self, values) -> np.ndarray:
         """d value / d parameter of each path at ``values`` (value for log-scaled paths, 1 for linear)."""

@@ -22,13 +22,11 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import math
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
-from scipy.stats import chi2
 
 from .._config import require
 from ..model.actuated import ActuatedArm
@@ -95,7 +93,7 @@ class UncertaintySet:
     def ellipsoid(cls, params: JointParameters, cov) -> "UncertaintySet":
         """The 95 % confidence ellipsoid of a :class:`~thermo_ddp.model.scope.Covariance` (module docstring)."""
         lam, vec = np.linalg.eigh(cov.array)
-        axes = math.sqrt(chi2.ppf(0.95, len(cov.paths))) * vec * np.sqrt(np.maximum(lam, 0.0))
+        axes = cov.radius_95 * vec * np.sqrt(np.maximum(lam, 0.0))
         log = tuple(s == "log" for s in cov.scale)
         nominal = np.array([value_of(params, k) for k in cov.paths])
         reach = np.sqrt(np.sum(axes ** 2, axis=1))
