@@ -1,8 +1,7 @@
 """The loop of designed experiments (thermo_ddp.studies.experiment_loop.close_the_loop) on short requests: two
 rounds sharing one duration, and the winding guard every later round keeps.
 
-Oracles: the request's duration; the loop's own recordings and diagnoses (what the second round is given and what
-it was left open); the winding guard of the passive diagnosis (``winding_rise_k_per_w``) times the copper loss at
+Oracles: the request's duration; the recordings the second round's diagnosis read and what it leaves open; the winding guard of the passive diagnosis (``winding_rise_k_per_w``) times the copper loss at
 the limit (``motor.joule_w``), over the design's predicted sensor; the truth's winding against the limit.
 """
 from __future__ import annotations
@@ -54,10 +53,13 @@ def test_two_rounds_share_the_duration_and_the_second_targets_what_is_still_open
     assert sum(r.design.duration_s for r in ran) <= DURATION_S
     assert ran[0].design.duration_s <= DURATION_S / 2
     assert calls[1]["settings"].duration_s <= DURATION_S - ran[0].design.duration_s
-    # the second round is designed from the diagnosis with the first round's recording, for what it leaves open
-    assert len(calls[1]["recordings"]) == 2 and calls[1]["recordings"][0] is rec
-    still_open = undetermined(diagnose_thermal(calls[1]["recordings"]))
-    assert loop.rounds[1].undetermined == still_open
+    # the second round is designed from the diagnosis of the passive and the first round's recordings, for what
+    # that diagnosis leaves open
+    second = calls[1]["recordings"]
+    assert len(second) == 2 and second[0] is rec
+    assert calls[1]["diagnosis"].recordings == (rec.name, second[1].name)
+    still_open = undetermined(calls[1]["diagnosis"])
+    assert loop.rounds[1].undetermined == still_open and still_open != undetermined(before)
     assert set(ran[1].design.targets) <= set(still_open)
     # safety: the robot's winding under the limit in every round
     assert max(r.true_peak_winding_c for r in ran) <= LIMIT_C
