@@ -34,10 +34,11 @@ def passive(name: str):
     return family_case(name, np.random.default_rng(1), **MEASUREMENT)
 
 
-def designed_and_rediagnosed(name: str):
+def designed_and_rediagnosed(name: str, before=None):
+    """The family's design (from ``before``, the passive diagnosis, when known), run on the truth, diagnosed again."""
     truth, rec = passive(name)
     design = design_experiment([rec], settings=ExperimentSettings(duration_s=DURATION_S, limit_c=LIMIT_C,
-                                                                  progress=False))
+                                                                  progress=False), diagnosis=before)
     assert design.success and design.status == "designed", design.message
     rows = design.programme()
     run, temps = run_programme(truth, rows, np.random.default_rng(2), name="designed", **MEASUREMENT)
@@ -73,7 +74,7 @@ def test_designed_experiment_settles_friction_heat_seen_at_one_speed():
     before = diagnose_thermal(rec)
     assert before.missing_physics == ["friction_heating"]
     assert not before.final_fit.identifiable(FRICTION_KEYS[0])   # one speed: c1 and c2 not separable
-    truth, design, rows, temps, after = designed_and_rediagnosed("friction_one_speed")
+    truth, design, rows, temps, after = designed_and_rediagnosed("friction_one_speed", before)
     assert design.targets == ("friction_heating",) and design.predicted_separation_k["friction_heating"] > 0
     assert design.to_dict()["not_determinable"] == []   # the design predicts every value pinned: and it is
     check_settled(truth, design, rows, temps, after)
