@@ -193,12 +193,13 @@ def test_default_plans_lift_once_slow_at_the_stop_and_end_at_rest(default_plan):
 def test_default_searches_take_few_solves_and_few_forward_passes(default_plan):
     """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer, the latter
     solved from the former's plan and multipliers, in 3 solves (the first probe's replay, biased by half its
-    distance, places the second on the boundary; 4 at 84 °C with a 1-knot bias) and fewer than 150 DDP
-    iterations (measured 97 and 141), with at most 1.6 forward passes (line-search trials) per iteration over
-    the whole search (measured 1.43 and 1.57: 139 and 222 passes in all; benchmarks/README.md)."""
+    distance, places the second on the boundary; 4 at 84 °C with a 1-knot bias) and fewer than 140 DDP
+    iterations (measured 97 and 134, 141 before stalled margin rows were released), with at most 1.7 forward
+    passes (line-search trials) per iteration and 225 in all over the whole search (measured 1.43 and 1.64: 139
+    and 220 passes; benchmarks/README.md)."""
     work = default_plan.solver["work"]
     assert default_plan.solver["solves"] <= 3 and default_plan.solver["attempts"] == ["ddp"]
-    assert work["iterations"] < 150 and work["forward_passes"] <= 1.6 * work["iterations"]
+    assert work["iterations"] < 140 and work["forward_passes"] <= min(1.7 * work["iterations"], 225)
 
 
 @pytest.mark.slow
