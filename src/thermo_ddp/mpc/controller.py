@@ -70,8 +70,9 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
-    problem = planner_ocp(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
-                          settings.controller.motion_weight, settings.controller.stop_weight)
+    c = settings.controller
+    problem = planner_ocp(lp.problem, settings.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight,
+                          c.stop_weight, {"joint_range": c.range_margin_rad, "bus_voltage": c.voltage_margin_v})
     return dataclasses.replace(lp, problem=problem)
 
 
@@ -79,6 +80,7 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
 # can change (:func:`free_present`): the hold band (hold_flag 0) and the winding limit (limit_c at PRESENT_LIMIT_C).
 FREE_AT_PRESENT = ("hold_band", "winding_limit")
 PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
+MARGIN_WEIGHTS = {"joint_range": 1e6, "bus_voltage": 1e3}  # per rad^2, per V^2
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
 ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (weight 0): moved from x_k to x_{k+1}
 
@@ -93,7 +95,8 @@ def free_present(params: np.ndarray, layout) -> np.ndarray:
 
 
 def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
-                motion_weight: float = 0.0, stop_weight: float = 0.0) -> OptimalControlProblem:
+                motion_weight: float = 0.0, stop_weight: float = 0.0,
+                margins: dict[str, float] | None = None) -> OptimalControlProblem:
     """The lift OCP as the receding-horizon planner solves it: the winding's back-off made soft when
     ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when their weight is > 0 (``one_way``:
     ``motion_weight``, ``stop_approach``: ``stop_weight``; 0: hard, moved from x_k to x_{k+1} = f(x_k, u_k, p_k),
@@ -130,6 +133,8 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
         if weights.get(c.name, 0.0) > 0:
             costs.append(c.penalty(weights[c.name], f"{c.name}_penalty"))
             continue
+        if (margins or {}).get(c.name, 0.0) > 0:
+            costs.append(c.shifted(-margins[c.name]).penalty(MARGIN_WEIGHTS[c.name], f"{c.name}_margin"))
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"
             c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
@@ -230,7 +235,15 @@ class RecedingHorizonController:
         window = free_present(np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)]), layout)
         if self.ambient_c is not None:
             layout.assign(window, "ambient_c", self.ambient_c)
-        return window
+        return self.reserve_lowering(window, self.lift_knots + self.hold_knots - k)
+
+    def reserve_lowering(self, params: np.ndarray, lowering: int) -> np.ndarray:
+        """``params`` with the winding limit lowered by ``lowering_reserve_c`` from knot ``lowering`` (the
+        lowering's first knot) on, while the lowering lies ahead (``lowering`` > 0), in place."""
+        reserve = self.settings.controller.lowering_reserve_c
+        if reserve > 0 and lowering > 0:
+            params[lowering:, self.lp.problem.parameters.slice("limit_c")] -= reserve
+        return params
 
     def planning_state(self, x_est: np.ndarray) -> np.ndarray:
         """The state the planner starts from: the estimate with every thermal node raised by ``tightening_c``."""
@@ -263,7 +276,8 @@ class RecedingHorizonController:
             ladder = SolverLadder(lp.problem, self.solver)
 
             def probe(task, warm):  # DDP and its restarts: a real-time loop does not fall back to IPOPT
-                task = dataclasses.replace(task, params=free_present(task.params, task.problem.parameters))
+                params = self.reserve_lowering(free_present(task.params, task.problem.parameters), task.hold_knots[1])
+                task = dataclasses.replace(task, params=params)
                 return ladder.solve(task, warm or initial_guess(task), reference=False)
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
             search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s),

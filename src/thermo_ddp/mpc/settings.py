@@ -60,7 +60,8 @@ class ScenarioSettings:
                   hold_step_s="(0, inf)", max_retries="[0, inf)", uncertainty_sigmas="[0, inf)",
                   sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)",
                   motion_weight="[0, inf)", stop_weight="[0, inf)", robust_uncertainty="[0, 1)", robust_sigmas="[0, inf)",
-                  robust_replan_s="(0, inf)")
+                  robust_replan_s="(0, inf)", lowering_reserve_c="[0, inf)",
+                  range_margin_rad="[0, inf)", voltage_margin_v="[0, inf)")
 class ControllerSettings:
     """Receding-horizon DDP: a solve slower than ``max_solve_s`` is discarded (a real-time deadline); the
     winding is held hard under the task's limit and the scenario's ``backoff_c`` band beneath it costs
@@ -96,6 +97,9 @@ class ControllerSettings:
     robust_uncertainty: float = 0.0      # the set's +-fraction (mpc.robust); 0: nominal planning
     robust_sigmas: float = 2.0           # the resistances' interval: the EKF's scale +- this many std
     robust_replan_s: float = 0.5         # the set and the hold reviewed this often while lifting and holding
+    lowering_reserve_c: float = 1.0
+    range_margin_rad: float = 0.04
+    voltage_margin_v: float = 2.0
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
