@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from ..tasks.attempts import SolverLadder
+from ..tasks.constraints import stop_approach
 from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
@@ -80,6 +81,9 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
 # can change (:func:`free_present`): the hold band (hold_flag 0) and the winding limit (limit_c at PRESENT_LIMIT_C).
 FREE_AT_PRESENT = ("hold_band", "winding_limit")
 PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
+# The rows of tasks.constraints.stop_approach that bound the speed toward a stop (v - near_hi, -v - near_lo): the
+# fallback's range guard leaves the motion away from a stop alone.
+TOWARD_STOPS = [0, 3]
 MARGIN_WEIGHTS = {"joint_range": 1e6, "bus_voltage": 1e3}  # per rad^2, per V^2
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
 ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (weight 0): moved from x_k to x_{k+1}
@@ -339,6 +343,11 @@ class RecedingHorizonController:
                         "feedback%s", t, "too late" if late else "failed", result.reason or result.status,
                         result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
                         ", derated to the no-heating current" if derated else "")
+        braked = False
+        if status == "fallback" or self.k >= self.lift_knots + self.hold_knots:  # the lift may swing: not braked
+            current, braked = self.range_guard(x_est, current)
+        if braked:
+            events.append("range_brake")
         return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
                            solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
                            iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
@@ -403,6 +412,48 @@ class RecedingHorizonController:
         cap = self.no_heating_current_a(x_est)
         capped = np.clip(u, -cap, cap)
         return capped, bool(np.any(capped != u))
+
+    def range_guard(self, x: np.ndarray, current: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``current`` moved, per joint, into the interval that keeps the next state inside the lift's
+        ``stop_approach`` envelope (the speed toward a stop at most ``stop_speed_rad_s + stop_slope_per_s *
+        distance``; :func:`thermo_ddp.tasks.constraints.stop_approach`, its rows toward a stop), and whether it was
+        moved: a brake on every period's current (the plan's rows are soft, the fallback's current stale), which overrides the derating (a load that falls through the joint's stop is not an option; the
+        winding's back-off band and the planning state's tightening are the heat it spends). The rows are affine
+        in each joint's own current over one step (the model's step at 0 and 1 A, the window's first row); a joint
+        whose rows cannot all be met gets the current of its most violated row's bound."""
+        x = np.asarray(x, float)
+        params = self.window()[0]
+        n = self.lp.model.nu
+        base = self._envelope(x, np.zeros(n), params)
+        out = np.array(current, dtype=float).reshape(-1)
+        for j in range(n):
+            one = np.zeros(n)
+            one[j] = 1.0
+            slope = self._envelope(x, one, params)[j] - base[j]
+            bounds = -base[j] / np.where(slope != 0, slope, np.nan)
+            upper = bounds[slope > 0].min(initial=np.inf)
+            lower = bounds[slope < 0].max(initial=-np.inf)
+            if lower <= upper:
+                out[j] = np.clip(out[j], lower, upper)
+            else:   # no current meets every row: the bound of the row most violated at the present current
+                rows = base[j] + slope * out[j]
+                worst = int(np.argmax(rows))
+                out[j] = bounds[worst] if np.isfinite(bounds[worst]) else out[j]
+        out = self._clip(out)
+        return out, bool(np.any(np.abs(out - np.asarray(current, float).reshape(-1)) > 1e-9))
+
+    def _envelope(self, x: np.ndarray, u: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """Per joint, the ``stop_approach`` rows (<= 0 inside) of the state one step after ``x`` under ``u``."""
+        x_next = np.array(self.lp.problem.functions.step(x, u, params)).ravel()
+        return np.array(self._stop_rows(x_next)).reshape(self.lp.model.nu, -1)
+
+    @functools.cached_property
+    def _stop_rows(self) -> ca.Function:
+        model, s = self.lp.model, self.lp.settings
+        x = ca.SX.sym("x", model.nx)
+        rows = [stop_approach(model, joint, x, s.stop_speed_rad_s, s.stop_slope_per_s)[TOWARD_STOPS, 0]
+                for joint in model.joints]
+        return ca.Function("stop_rows", [x], [ca.vertcat(*rows)])
 
     def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:
         """Per joint, the ``|current|`` at which the winding's temperature stops rising at state ``x`` (model ODE:

@@ -93,7 +93,7 @@ class ControllerSettings:
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
     careful_motion: bool = True          # one_way and stop_approach in the planner (mpc.controller)
     motion_weight: float = 10.0          # > 0: one_way soft, 0.5 * w * excess^2 (mpc.controller)
-    stop_weight: float = 10.0            # > 0: stop_approach soft, 0.5 * w * excess^2 (mpc.controller)
+    stop_weight: float = 100.0           # > 0: stop_approach soft, 0.5 * w * excess^2 (mpc.controller)
     robust_uncertainty: float = 0.0      # the set's +-fraction (mpc.robust); 0: nominal planning
     robust_sigmas: float = 2.0           # the resistances' interval: the EKF's scale +- this many std
     robust_replan_s: float = 0.5         # the set and the hold reviewed this often while lifting and holding
