@@ -11,7 +11,10 @@ Faults: a solve that fails, or takes longer than ``settings.controller.max_solve
 too late; it is discarded), also leads to that fallback, and the period says so in its events. With
 ``settings.controller.derate`` the fallback current is capped at the no-heating current (the current whose
 Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
-planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
+planning state's winding is at the planning limit; the range guard (:meth:`RecedingHorizonController.range_guard`)
+then brakes a fallback's current, and every current from the lowering's start on, into the ``stop_approach``
+envelope toward the joint's stops, over the derating. While the lowering lies ahead, its knots' winding limit is
+lowered by ``lowering_reserve_c`` (the hold keeps the lowering's heat). ``tightening_c`` raises every thermal node of
 the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
 time constant of tens of minutes this tightens the limit by about as much over the whole window.
 
@@ -71,10 +74,15 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
+    return dataclasses.replace(lp, problem=controller_ocp(lp.problem, settings))
+
+
+def controller_ocp(problem: OptimalControlProblem, settings: MPCSettings) -> OptimalControlProblem:
+    """``problem`` (the lift's OCP) as the controller of ``settings`` plans it (:func:`planner_ocp` with the
+    settings' back-off band, careful-motion weights and margins)."""
     c = settings.controller
-    problem = planner_ocp(lp.problem, settings.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight,
-                          c.stop_weight, {"joint_range": c.range_margin_rad, "bus_voltage": c.voltage_margin_v})
-    return dataclasses.replace(lp, problem=problem)
+    return planner_ocp(problem, settings.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight, c.stop_weight,
+                       {"joint_range": c.range_margin_rad, "bus_voltage": c.voltage_margin_v})
 
 
 # Stage rows on the state alone that the window switches off at the measured present state x_0, which no control
@@ -114,6 +122,11 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
     x_k (its knot-0 row off) rather than on f(x_k, u_k): the same constrained states, without the composed
     rows' second derivatives of the step in every knot's local model (bench_mpc_step: the fused backward knot
     11,564 -> 7,608 instructions with careful motion).
+
+    ``margins`` (row name -> margin, in the row's unit; ``joint_range``, ``bus_voltage``): the band within the
+    margin of the hard row costs ``0.5 * MARGIN_WEIGHTS[name] * excess^2``, the hard row kept (measured on the
+    nominal sweep: without them, loops whose plans used the range to the stop or the whole bus voltage crossed
+    them by 0.1-0.9 mrad and 0.1-1.8 V on the mismatched plant).
 
     Soft back-off: the winding is held hard under the task's limit (the planning limit + ``backoff_c``) and
     the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
@@ -230,7 +243,8 @@ class RecedingHorizonController:
         return self.hold_knots * self.lp.settings.dt_s
 
     def window(self, k: int | None = None) -> np.ndarray:
-        """Per-knot parameters of the window starting at knot ``k`` (default: now), last task row held."""
+        """Per-knot parameters of the window starting at knot ``k`` (default: now), last task row held, the
+        lowering's reserve applied (:meth:`reserve_lowering`)."""
         k = self.k if k is None else k
         task = self.task.with_hold(self.hold_s).params
         n = self.lp.problem.horizon + 1

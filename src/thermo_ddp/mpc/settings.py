@@ -74,7 +74,10 @@ class ControllerSettings:
     ``stop_approach``; 0: hard, from x_1 on); ``robust_uncertainty``
     > 0: the hold kept safe for every motor of the file's values within +-that fraction, its resistances
     narrowed to the observer's ``robust_sigmas`` interval, reviewed every ``robust_replan_s``
-    (:mod:`thermo_ddp.mpc.robust`; 0: the nominal hold)."""
+    (:mod:`thermo_ddp.mpc.robust`; 0: the nominal hold); ``lowering_reserve_c``: the winding limit of the
+    lowering's knots lowered by this while the lowering lies ahead (the hold ends with the lowering's heat kept);
+    ``range_margin_rad`` and ``voltage_margin_v``: soft bands inside the joint range and under the bus voltage
+    (the hard rows kept; :func:`thermo_ddp.mpc.controller.controller_ocp`)."""
 
     control_period_s: float = 0.1        # = the planner's knot spacing
     horizon_knots: int = 200
@@ -97,9 +100,9 @@ class ControllerSettings:
     robust_uncertainty: float = 0.0      # the set's +-fraction (mpc.robust); 0: nominal planning
     robust_sigmas: float = 2.0           # the resistances' interval: the EKF's scale +- this many std
     robust_replan_s: float = 0.5         # the set and the hold reviewed this often while lifting and holding
-    lowering_reserve_c: float = 1.0
-    range_margin_rad: float = 0.04
-    voltage_margin_v: float = 2.0
+    lowering_reserve_c: float = 1.0      # K; measured on the nominal sweep (benchmarks/README.md, branch mpc6)
+    range_margin_rad: float = 0.04       # soft band inside the joint range (rad)
+    voltage_margin_v: float = 2.0        # soft band under the bus voltage (V)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",
