@@ -2,7 +2,7 @@
 
 The solver-level step on the controller's problem (no controller loop logic from thermo_ddp.mpc): the lift of
 bench_lift_ocp (40 kg, 20 s scenario) with careful motion on (the controller's default) and off, transcribed as
-the receding-horizon controller does (mpc.controller.planner_ocp: the winding limit and the hold band never on
+the receding-horizon controller does (mpc.controller.controller_ocp: the winding limit and the hold band never on
 the measured x_0, mpc.controller.free_present; the limit's soft back-off band; careful motion's rows soft), with
 the lift's integrator (rk4_4, as the earlier figures) and the controller's own (rk4: cases ``*_rk4``), under
 140 °C (limit inactive) and 94 °C (limit active in every prediction: it binds near the end of the hold, inside
@@ -32,7 +32,7 @@ from _common import write
 from _ocp_bench import lift_problem, shifted_nlp_warm_start, timed_cpu
 from thermo_ddp.tasks.lift import LiftSettings, initial_guess, make_solver
 from thermo_ddp.mpc import MPCSettings
-from thermo_ddp.mpc.controller import free_present, mpc_ddp_settings, planner_ocp, shifted_warm_start
+from thermo_ddp.mpc.controller import controller_ocp, free_present, mpc_ddp_settings, shifted_warm_start
 from thermo_ddp.tasks.attempts import SolverLadder
 
 KNOTS = 200
@@ -50,10 +50,7 @@ COLD_ITERATIONS = 200  # DDP's first plan (untimed; made before moving): the re-
 def controller_problem(limit_c: float, careful: bool, integrator: str):
     """The bench's lift as the controller transcribes it (no row on x_0, soft back-off, soft motion rows)."""
     lp = lift_problem(KNOTS, limit_c, careful_motion=careful, integrator=integrator)
-    c = CONTROLLER.controller
-    problem = planner_ocp(lp.problem, CONTROLLER.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight,
-                          c.stop_weight)
-    return dataclasses.replace(lp, problem=problem)
+    return dataclasses.replace(lp, problem=controller_ocp(lp.problem, CONTROLLER))
 
 
 def warm_start(name: str, result, problem):

@@ -11,7 +11,10 @@ Faults: a solve that fails, or takes longer than ``settings.controller.max_solve
 too late; it is discarded), also leads to that fallback, and the period says so in its events. With
 ``settings.controller.derate`` the fallback current is capped at the no-heating current (the current whose
 Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
-planning state's winding is at the planning limit. ``tightening_c`` raises every thermal node of
+planning state's winding is at the planning limit; the range guard (:meth:`RecedingHorizonController.range_guard`)
+then brakes a fallback's current, and every current from the lowering's start on, into the ``stop_approach``
+envelope toward the joint's stops, over the derating. While the lowering lies ahead, its knots' winding limit is
+lowered by ``lowering_reserve_c`` (the hold keeps the lowering's heat). ``tightening_c`` raises every thermal node of
 the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
 time constant of tens of minutes this tightens the limit by about as much over the whole window.
 
@@ -28,6 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ..tasks.attempts import SolverLadder
+from ..tasks.constraints import stop_approach
 from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
@@ -70,15 +74,25 @@ def planning_problem(settings: MPCSettings, model: ActuatedArm) -> LiftProblem:
     require(room >= -1e-9, "MPCSettings", "horizon_knots", settings.controller.horizon_knots,
             f"the window must span the lift, lowering and settling ({base.lift_s + base.lower_s + base.settle_s:g} s)")
     lp = build_lift_problem(dataclasses.replace(base, hold_s=max(room, 0.0)), model)
-    problem = planner_ocp(lp.problem, settings.scenario.backoff_c, settings.controller.backoff_weight_per_k2,
-                          settings.controller.motion_weight, settings.controller.stop_weight)
-    return dataclasses.replace(lp, problem=problem)
+    return dataclasses.replace(lp, problem=controller_ocp(lp.problem, settings))
+
+
+def controller_ocp(problem: OptimalControlProblem, settings: MPCSettings) -> OptimalControlProblem:
+    """``problem`` (the lift's OCP) as the controller of ``settings`` plans it (:func:`planner_ocp` with the
+    settings' back-off band, careful-motion weights and margins)."""
+    c = settings.controller
+    return planner_ocp(problem, settings.scenario.backoff_c, c.backoff_weight_per_k2, c.motion_weight, c.stop_weight,
+                       {"joint_range": c.range_margin_rad, "bus_voltage": c.voltage_margin_v})
 
 
 # Stage rows on the state alone that the window switches off at the measured present state x_0, which no control
 # can change (:func:`free_present`): the hold band (hold_flag 0) and the winding limit (limit_c at PRESENT_LIMIT_C).
 FREE_AT_PRESENT = ("hold_band", "winding_limit")
 PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
+# The rows of tasks.constraints.stop_approach that bound the speed toward a stop (v - near_hi, -v - near_lo): the
+# fallback's range guard leaves the motion away from a stop alone.
+TOWARD_STOPS = [0, 3]
+MARGIN_WEIGHTS = {"joint_range": 1e6, "bus_voltage": 1e3}  # per rad^2, per V^2
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
 ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (weight 0): moved from x_k to x_{k+1}
 
@@ -93,7 +107,8 @@ def free_present(params: np.ndarray, layout) -> np.ndarray:
 
 
 def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight: float,
-                motion_weight: float = 0.0, stop_weight: float = 0.0) -> OptimalControlProblem:
+                motion_weight: float = 0.0, stop_weight: float = 0.0,
+                margins: dict[str, float] | None = None) -> OptimalControlProblem:
     """The lift OCP as the receding-horizon planner solves it: the winding's back-off made soft when
     ``backoff_weight`` > 0, careful motion's rows (:data:`SOFT_ROWS`) soft when their weight is > 0 (``one_way``:
     ``motion_weight``, ``stop_approach``: ``stop_weight``; 0: hard, moved from x_k to x_{k+1} = f(x_k, u_k, p_k),
@@ -107,6 +122,11 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
     x_k (its knot-0 row off) rather than on f(x_k, u_k): the same constrained states, without the composed
     rows' second derivatives of the step in every knot's local model (bench_mpc_step: the fused backward knot
     11,564 -> 7,608 instructions with careful motion).
+
+    ``margins`` (row name -> margin, in the row's unit; ``joint_range``, ``bus_voltage``): the band within the
+    margin of the hard row costs ``0.5 * MARGIN_WEIGHTS[name] * excess^2``, the hard row kept (measured on the
+    nominal sweep: without them, loops whose plans used the range to the stop or the whole bus voltage crossed
+    them by 0.1-0.9 mrad and 0.1-1.8 V on the mismatched plant).
 
     Soft back-off: the winding is held hard under the task's limit (the planning limit + ``backoff_c``) and
     the band above the planning limit costs ``0.5 * backoff_weight * excess_K^2``. A plant hotter than
@@ -130,6 +150,8 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
         if weights.get(c.name, 0.0) > 0:
             costs.append(c.penalty(weights[c.name], f"{c.name}_penalty"))
             continue
+        if (margins or {}).get(c.name, 0.0) > 0:
+            costs.append(c.shifted(-margins[c.name]).penalty(MARGIN_WEIGHTS[c.name], f"{c.name}_margin"))
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"
             c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
@@ -221,7 +243,8 @@ class RecedingHorizonController:
         return self.hold_knots * self.lp.settings.dt_s
 
     def window(self, k: int | None = None) -> np.ndarray:
-        """Per-knot parameters of the window starting at knot ``k`` (default: now), last task row held."""
+        """Per-knot parameters of the window starting at knot ``k`` (default: now), last task row held, the
+        lowering's reserve applied (:meth:`reserve_lowering`)."""
         k = self.k if k is None else k
         task = self.task.with_hold(self.hold_s).params
         n = self.lp.problem.horizon + 1
@@ -230,7 +253,15 @@ class RecedingHorizonController:
         window = free_present(np.vstack([rows, np.repeat(task[-1:], n - rows.shape[0], axis=0)]), layout)
         if self.ambient_c is not None:
             layout.assign(window, "ambient_c", self.ambient_c)
-        return window
+        return self.reserve_lowering(window, self.lift_knots + self.hold_knots - k)
+
+    def reserve_lowering(self, params: np.ndarray, lowering: int) -> np.ndarray:
+        """``params`` with the winding limit lowered by ``lowering_reserve_c`` from knot ``lowering`` (the
+        lowering's first knot) on, while the lowering lies ahead (``lowering`` > 0), in place."""
+        reserve = self.settings.controller.lowering_reserve_c
+        if reserve > 0 and lowering > 0:
+            params[lowering:, self.lp.problem.parameters.slice("limit_c")] -= reserve
+        return params
 
     def planning_state(self, x_est: np.ndarray) -> np.ndarray:
         """The state the planner starts from: the estimate with every thermal node raised by ``tightening_c``."""
@@ -263,7 +294,8 @@ class RecedingHorizonController:
             ladder = SolverLadder(lp.problem, self.solver)
 
             def probe(task, warm):  # DDP and its restarts: a real-time loop does not fall back to IPOPT
-                task = dataclasses.replace(task, params=free_present(task.params, task.problem.parameters))
+                params = self.reserve_lowering(free_present(task.params, task.problem.parameters), task.hold_knots[1])
+                task = dataclasses.replace(task, params=params)
                 return ladder.solve(task, warm or initial_guess(task), reference=False)
             estimate = time_to_limit_s(lp.model, lp.x0, lp.settings.goal_rad, lp.settings.limit_c)
             search = longest_feasible_hold(lp.with_hold(self.hold_s), probe, int(estimate / lp.settings.dt_s),
@@ -325,6 +357,11 @@ class RecedingHorizonController:
                         "feedback%s", t, "too late" if late else "failed", result.reason or result.status,
                         result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
                         ", derated to the no-heating current" if derated else "")
+        braked = False
+        if status == "fallback" or self.k >= self.lift_knots + self.hold_knots:  # the lift may swing: not braked
+            current, braked = self.range_guard(x_est, current)
+        if braked:
+            events.append("range_brake")
         return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
                            solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
                            iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
@@ -389,6 +426,48 @@ class RecedingHorizonController:
         cap = self.no_heating_current_a(x_est)
         capped = np.clip(u, -cap, cap)
         return capped, bool(np.any(capped != u))
+
+    def range_guard(self, x: np.ndarray, current: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``current`` moved, per joint, into the interval that keeps the next state inside the lift's
+        ``stop_approach`` envelope (the speed toward a stop at most ``stop_speed_rad_s + stop_slope_per_s *
+        distance``; :func:`thermo_ddp.tasks.constraints.stop_approach`, its rows toward a stop), and whether it was
+        moved: a brake on every period's current (the plan's rows are soft, the fallback's current stale), which overrides the derating (a load that falls through the joint's stop is not an option; the
+        winding's back-off band and the planning state's tightening are the heat it spends). The rows are affine
+        in each joint's own current over one step (the model's step at 0 and 1 A, the window's first row); a joint
+        whose rows cannot all be met gets the current of its most violated row's bound."""
+        x = np.asarray(x, float)
+        params = self.window()[0]
+        n = self.lp.model.nu
+        base = self._envelope(x, np.zeros(n), params)
+        out = np.array(current, dtype=float).reshape(-1)
+        for j in range(n):
+            one = np.zeros(n)
+            one[j] = 1.0
+            slope = self._envelope(x, one, params)[j] - base[j]
+            bounds = -base[j] / np.where(slope != 0, slope, np.nan)
+            upper = bounds[slope > 0].min(initial=np.inf)
+            lower = bounds[slope < 0].max(initial=-np.inf)
+            if lower <= upper:
+                out[j] = np.clip(out[j], lower, upper)
+            else:   # no current meets every row: the bound of the row most violated at the present current
+                rows = base[j] + slope * out[j]
+                worst = int(np.argmax(rows))
+                out[j] = bounds[worst] if np.isfinite(bounds[worst]) else out[j]
+        out = self._clip(out)
+        return out, bool(np.any(np.abs(out - np.asarray(current, float).reshape(-1)) > 1e-9))
+
+    def _envelope(self, x: np.ndarray, u: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """Per joint, the ``stop_approach`` rows (<= 0 inside) of the state one step after ``x`` under ``u``."""
+        x_next = np.array(self.lp.problem.functions.step(x, u, params)).ravel()
+        return np.array(self._stop_rows(x_next)).reshape(self.lp.model.nu, -1)
+
+    @functools.cached_property
+    def _stop_rows(self) -> ca.Function:
+        model, s = self.lp.model, self.lp.settings
+        x = ca.SX.sym("x", model.nx)
+        rows = [stop_approach(model, joint, x, s.stop_speed_rad_s, s.stop_slope_per_s)[TOWARD_STOPS, 0]
+                for joint in model.joints]
+        return ca.Function("stop_rows", [x], [ca.vertcat(*rows)])
 
     def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:
         """Per joint, the ``|current|`` at which the winding's temperature stops rising at state ``x`` (model ODE:

@@ -60,7 +60,8 @@ class ScenarioSettings:
                   hold_step_s="(0, inf)", max_retries="[0, inf)", uncertainty_sigmas="[0, inf)",
                   sensor_fault_backoff_c="[0, inf)", ambient_change_c="(0, inf)", backoff_weight_per_k2="[0, inf)",
                   motion_weight="[0, inf)", stop_weight="[0, inf)", robust_uncertainty="[0, 1)", robust_sigmas="[0, inf)",
-                  robust_replan_s="(0, inf)")
+                  robust_replan_s="(0, inf)", lowering_reserve_c="[0, inf)",
+                  range_margin_rad="[0, inf)", voltage_margin_v="[0, inf)")
 class ControllerSettings:
     """Receding-horizon DDP: a solve slower than ``max_solve_s`` is discarded (a real-time deadline); the
     winding is held hard under the task's limit and the scenario's ``backoff_c`` band beneath it costs
@@ -73,7 +74,10 @@ class ControllerSettings:
     ``stop_approach``; 0: hard, from x_1 on); ``robust_uncertainty``
     > 0: the hold kept safe for every motor of the file's values within +-that fraction, its resistances
     narrowed to the observer's ``robust_sigmas`` interval, reviewed every ``robust_replan_s``
-    (:mod:`thermo_ddp.mpc.robust`; 0: the nominal hold)."""
+    (:mod:`thermo_ddp.mpc.robust`; 0: the nominal hold); ``lowering_reserve_c``: the winding limit of the
+    lowering's knots lowered by this while the lowering lies ahead (the hold ends with the lowering's heat kept);
+    ``range_margin_rad`` and ``voltage_margin_v``: soft bands inside the joint range and under the bus voltage
+    (the hard rows kept; :func:`thermo_ddp.mpc.controller.controller_ocp`)."""
 
     control_period_s: float = 0.1        # = the planner's knot spacing
     horizon_knots: int = 200
@@ -92,10 +96,13 @@ class ControllerSettings:
     backoff_weight_per_k2: float = 1e4   # > 0: the back-off band under the limit is soft (mpc.controller)
     careful_motion: bool = True          # one_way and stop_approach in the planner (mpc.controller)
     motion_weight: float = 10.0          # > 0: one_way soft, 0.5 * w * excess^2 (mpc.controller)
-    stop_weight: float = 10.0            # > 0: stop_approach soft, 0.5 * w * excess^2 (mpc.controller)
+    stop_weight: float = 100.0           # > 0: stop_approach soft, 0.5 * w * excess^2 (mpc.controller)
     robust_uncertainty: float = 0.0      # the set's +-fraction (mpc.robust); 0: nominal planning
     robust_sigmas: float = 2.0           # the resistances' interval: the EKF's scale +- this many std
     robust_replan_s: float = 0.5         # the set and the hold reviewed this often while lifting and holding
+    lowering_reserve_c: float = 1.0      # K; measured on the nominal sweep (benchmarks/README.md, branch mpc6)
+    range_margin_rad: float = 0.04       # soft band inside the joint range (rad)
+    voltage_margin_v: float = 2.0        # soft band under the bus voltage (V)
 
     def __post_init__(self):
         require(self.integrator in ("rk4", "implicit_euler"), "MPCSettings controller", "integrator",

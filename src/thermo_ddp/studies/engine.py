@@ -67,8 +67,9 @@ def dask_client(settings: EngineSettings = EngineSettings()) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if settings.scheduler is None:
-        with LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
-                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        with _dask_info_quiet(), LocalCluster(n_workers=settings.workers, threads_per_worker=1, processes=True,
+                                              dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+                Client(cluster) as client:
             yield client
         return
     _probe(settings)
@@ -79,6 +80,20 @@ def dask_client(settings: EngineSettings = EngineSettings()) -> Iterator[Any]:
                          f"no Dask scheduler answered within {settings.connect_timeout_s:g} s ({err})") from None
     with client:
         yield client
+
+
+@contextlib.contextmanager
+def _dask_info_quiet() -> Iterator[None]:
+    """Dask's INFO lines (its scheduler runs in this process: connections, workers added and removed, closing) off
+    while a LocalCluster lives, its set-up and tear-down included (``silence_logs`` restores them before the
+    tear-down); warnings and errors still show."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(max(level, logging.WARNING))
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _probe(settings: EngineSettings) -> None:
