@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ..tasks.attempts import SolverLadder
-from ..tasks.constraints import stop_approach
+from ..tasks.constraints import toward_stops
 from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
@@ -89,9 +89,6 @@ def controller_ocp(problem: OptimalControlProblem, settings: MPCSettings) -> Opt
 # can change (:func:`free_present`): the hold band (hold_flag 0) and the winding limit (limit_c at PRESENT_LIMIT_C).
 FREE_AT_PRESENT = ("hold_band", "winding_limit")
 PRESENT_LIMIT_C = 1e4  # the window's winding limit at x_0: none (a finite number: IPOPT refuses infinite values)
-# The rows of tasks.constraints.stop_approach that bound the speed toward a stop (v - near_hi, -v - near_lo): the
-# fallback's range guard leaves the motion away from a stop alone.
-TOWARD_STOPS = [0, 3]
 MARGIN_WEIGHTS = {"joint_range": 1e6, "bus_voltage": 1e3}  # per rad^2, per V^2
 SOFT_ROWS = ("stop_approach", "one_way")  # careful motion's stage rows (tasks.lift)
 ON_NEXT_STATE = SOFT_ROWS  # hard careful motion (weight 0): moved from x_k to x_{k+1}
@@ -430,9 +427,10 @@ class RecedingHorizonController:
     def range_guard(self, x: np.ndarray, current: np.ndarray) -> tuple[np.ndarray, bool]:
         """``current`` moved, per joint, into the interval that keeps the next state inside the lift's
         ``stop_approach`` envelope (the speed toward a stop at most ``stop_speed_rad_s + stop_slope_per_s *
-        distance``; :func:`thermo_ddp.tasks.constraints.stop_approach`, its rows toward a stop), and whether it was
-        moved: a brake on every period's current (the plan's rows are soft, the fallback's current stale), which overrides the derating (a load that falls through the joint's stop is not an option; the
-        winding's back-off band and the planning state's tightening are the heat it spends). The rows are affine
+        distance``; :func:`thermo_ddp.tasks.constraints.toward_stops`), and whether it was moved: a brake on every
+        period's current (the plan's rows are soft, the fallback's current stale), which overrides the derating (a
+        load that falls through the joint's stop is not an option; the winding's back-off band and the planning
+        state's tightening are the heat it spends). The rows are affine
         in each joint's own current over one step (the model's step at 0 and 1 A, the window's first row); a joint
         whose rows cannot all be met gets the current of its most violated row's bound."""
         x = np.asarray(x, float)
@@ -465,8 +463,7 @@ class RecedingHorizonController:
     def _stop_rows(self) -> ca.Function:
         model, s = self.lp.model, self.lp.settings
         x = ca.SX.sym("x", model.nx)
-        rows = [stop_approach(model, joint, x, s.stop_speed_rad_s, s.stop_slope_per_s)[TOWARD_STOPS, 0]
-                for joint in model.joints]
+        rows = [toward_stops(model, joint, x, s.stop_speed_rad_s, s.stop_slope_per_s) for joint in model.joints]
         return ca.Function("stop_rows", [x], [ca.vertcat(*rows)])
 
     def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:

@@ -138,7 +138,8 @@ class DDPSettings:
     compiler_flags: tuple = ("-O2", "-march=native")  # gcc; big generated files at -O1/-O0 (see codegen)
 
     def __post_init__(self):
-        ints = ("max_iterations", "box_iterations", "inner_max_iterations", "nonmonotone_memory", "margin_release_steps")
+        ints = ("max_iterations", "box_iterations", "inner_max_iterations", "nonmonotone_memory",
+                "margin_release_steps")
         for name in ints:
             v = getattr(self, name)
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,

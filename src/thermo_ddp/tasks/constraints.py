@@ -23,11 +23,22 @@ def joint_limit_constraints(model: ActuatedArm, joint: str, x, current_a, limit_
             "joint_velocity": ca.vertcat(v - velocity_limit_rad_s, -v - velocity_limit_rad_s)}
 
 
+def _stop_speeds(model: ActuatedArm, joint: str, x, stop_speed_rad_s: float, slope_per_s: float):
+    """The joint's speed and its bounds near the upper and the lower stop (``stop_speed + slope * distance``)."""
+    q, v = (x[model.index(joint, name)] for name in ("q_rad", "v_rad_s"))
+    lo, hi = (bound[model.joints.index(joint)] for bound in joint_range_rad(model))
+    return v, stop_speed_rad_s + slope_per_s * (hi - q), stop_speed_rad_s + slope_per_s * (q - lo)
+
+
 def stop_approach(model: ActuatedArm, joint: str, x, stop_speed_rad_s: float, slope_per_s: float):
     """``g <= 0``: the speed near each joint stop at most ``stop_speed_rad_s + slope_per_s * distance``, so a
     joint reaches its stops slowly or not at all."""
-    q, v = (x[model.index(joint, name)] for name in ("q_rad", "v_rad_s"))
-    lo, hi = (bound[model.joints.index(joint)] for bound in joint_range_rad(model))
-    near_hi, near_lo = stop_speed_rad_s + slope_per_s * (hi - q), stop_speed_rad_s + slope_per_s * (q - lo)
+    v, near_hi, near_lo = _stop_speeds(model, joint, x, stop_speed_rad_s, slope_per_s)
     return ca.vertcat(v - near_hi, -v - near_hi, v - near_lo, -v - near_lo)
+
+
+def toward_stops(model: ActuatedArm, joint: str, x, stop_speed_rad_s: float, slope_per_s: float):
+    """The rows of :func:`stop_approach` that bound the speed toward a stop (toward the upper, toward the lower)."""
+    v, near_hi, near_lo = _stop_speeds(model, joint, x, stop_speed_rad_s, slope_per_s)
+    return ca.vertcat(v - near_hi, -v - near_lo)
 
