@@ -354,11 +354,9 @@ class RecedingHorizonController:
                         "feedback%s", t, "too late" if late else "failed", result.reason or result.status,
                         result.max_constraint_violation, 1e3 * sum(r.solve_s for r in results),
                         ", derated to the no-heating current" if derated else "")
-        braked = False
         if status == "fallback" or self.k >= self.lift_knots + self.hold_knots:  # the lift may swing: not braked
             current, braked = self.range_guard(x_est, current)
-        if braked:
-            events.append("range_brake")
+            events += ["range_brake"] if braked else []
         return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
                            solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
                            iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
