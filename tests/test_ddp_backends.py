@@ -121,3 +121,27 @@ def test_second_order_chunks_reassemble_the_hessian(monkeypatch):
     got = compiled.backward(X, U, P, lam, lamN, C, RHO, 1.0)
     assert got[1][3] > 0
     _close(got, vm.backward(X, U, P, lam, lamN, C, RHO, 1.0))
+
+
+@pytest.mark.parametrize("limit", [0, 10**9], ids=["local_model_then_core", "one_reverse_sweep"])
+def test_both_compiled_first_order_passes_equal_numpy(monkeypatch, limit):
+    """The compiled gradient pass from the local model and ``ddp_grad_knot`` (a big model's: no extra C to
+    build) and from one reverse sweep of the knot's Lagrangian (a small model's) give numpy's costates."""
+    import ctypes
+
+    from thermo_ddp.solvers import _backends
+    monkeypatch.setattr(_backends, "FIRST_ORDER_MAX_INSTRUCTIONS", limit)
+    monkeypatch.setattr(_pass_cache, "key", lambda problem, settings: None)  # build, never the index's library
+    problem, xs, us, P, _ = _pendulum()
+    compiled = DDPSolver(problem, DDPSettings(backend="codegen")).backend
+    numpy_ = DDPSolver(problem, DDPSettings(backend="numpy")).backend
+    assert bool(ctypes.c_void_p.in_dll(compiled._lib, "ddp_grad_first_knot_fn").value) == (limit > 0)
+    X, U = xs + 0.1, us - 0.5
+    lam, lamN = np.full((problem.horizon, problem.n_constraints), 0.5), np.full(problem.n_terminal_constraints, 0.5)
+    C = numpy_.evaluate(X, U, P)[3]
+    policy, summary, _ = numpy_.backward(X, U, P, lam, lamN, C, RHO, 1.0)
+    assert summary[3] > 0
+    stat, costates = compiled.gradient(X, U, P, lam, lamN, policy, RHO)
+    assert stat > 1e-3  # not a stationary iterate: the pass has something to compare
+    stat2, costates2 = numpy_.gradient(X, U, P, lam, lamN, policy, RHO)
+    _close(([stat], costates), ([stat2], costates2))

@@ -60,7 +60,9 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     knots["fwd"] = _forward_knot(problem, layout, x, p)
     knots["eval"], knots["end"] = _evaluation_knots(problem, x, u, p)
     small = len(knots["hess"]) == 1 and knots["hess"][0].n_instructions() <= FUSED_MAX_INSTRUCTIONS
-    knots["fused"] = _fused_knots(problem, settings, layout, knots) if compiled and small else []
+    fused = _fused_knots(problem, settings, layout, knots) if compiled and small else []
+    first = [knots["grad_first"]] if knots["grad_first"].n_instructions() <= FIRST_ORDER_MAX_INSTRUCTIONS else []
+    knots["optional"] = fused + first if compiled else []
     return knots
 
 
@@ -86,8 +88,16 @@ def _fused_knots(problem, settings, layout, knots):
     return [step, eval_step]
 
 
-# The knots the C driver calls (and "hess"): the local model, then the Riccati step; the first-order step in one.
-COMPILED = ("local", "local_eval", "back_core", "grad_first", "terminal", "fwd", "eval", "end")
+# The knots the C driver calls (and "hess"): the local model, then the Riccati step or the first-order step.
+COMPILED = ("local", "local_eval", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
+# A model whose first-order step from one reverse sweep (``grad_first``) is at most this big also gets it compiled:
+# the driver's first-order pass calls it alone instead of the local model then ``grad_core`` (rk4_4 lift knot:
+# 1,918 against 2,380 instructions). Above it, its C costs more to build than it saves: the 7-joint arm's (38,407
+# instructions, a 0.9 MB C file) took 11.8 s of gcc, the arm's build 14.8 -> 21.9 s for a gradient pass that
+# runs a few times per solve.
+FIRST_ORDER_MAX_INSTRUCTIONS = 10_000
+# Optional knot functions: the driver calls them through pointers, NULL when not generated.
+OPTIONAL = ("ddp_fused_step", "ddp_fused_eval_step", "ddp_grad_first_knot")
 MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
@@ -96,7 +106,6 @@ HESSIAN_CHUNK_NODES = 1_000_000
 # the local model and the second-order term (MPC lift, N = 200: first pass 612 -> ~445 us, as before the
 # per-knot split). The 7-joint arm's term (1.1e6 instructions) is far above it.
 FUSED_MAX_INSTRUCTIONS = 100_000
-FUSED = ("ddp_fused_step", "ddp_fused_eval_step")
 
 
 def _function(name, inputs, outputs, names_in, names_out, cse=True):
@@ -368,9 +377,9 @@ def compiled_library(problem, settings, layout):
     if library is not None:
         return library
     knots = knot_functions(problem, settings, layout, compiled=True)
-    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"] + knots["fused"]}
+    functions = {f.name(): f for f in [knots[k] for k in COMPILED] + knots["hess"] + knots["optional"]}
     sources = {_pass_cache.DRIVER: _pass_cache.driver_source(),
-               "ddp_hess_table.c": _hessian_table(knots["hess"], knots["fused"])}
+               "ddp_knot_table.c": _knot_table(knots["hess"], knots["optional"])}
     try:
         path = codegen.compile_library(functions, settings.compiler_flags, sources)
     except (RuntimeError, subprocess.CalledProcessError) as err:
@@ -379,22 +388,21 @@ def compiled_library(problem, settings, layout):
     return _pass_cache.record(key, path)
 
 
-def _hessian_table(chunks, fused) -> str:
-    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton) and of the
-    fused Riccati steps (NULL when ``fused`` is empty)."""
+def _knot_table(chunks, optional) -> str:
+    """C table of the second-order chunk functions for the driver (ddp_n_hess = 0: Gauss-Newton) and the
+    pointers to the ``OPTIONAL`` knot functions (NULL for those not in ``optional``)."""
     sig = "(const double **, double **, long long *, double *, int)"
     wsig = "(long long *, long long *, long long *, long long *)"
-    names, fused_names = [f.name() for f in chunks], [f.name() for f in fused]
-    lines = [f"int {n}{sig};\nint {n}_work{wsig};" for n in names]
+    names, present = [f.name() for f in chunks], {f.name() for f in optional}
+    declared = [f"int {n}{sig};\nint {n}_work{wsig};" for n in names + sorted(present)]
     listed = lambda items: "{" + (", ".join(items) or "0") + "}"  # noqa: E731
-    return "\n".join(lines + [
+    return "\n".join(declared + [
         f"const int ddp_n_hess = {len(names)};",
         f"int (*const ddp_hess[]){sig} = {listed(names)};",
         f"int (*const ddp_hess_work[]){wsig} = {listed(n + '_work' for n in names)};",
         f"const int ddp_hess_size[] = {listed(str(f.nnz_out(0)) for f in chunks)};",
-        *[f"int {n}{sig};\nint {n}_work{wsig};" for n in fused_names],
-        *[f"int (*const {n}_fn){sig} = {n if fused else '0'};\nint (*const {n}_work_fn){wsig} = "
-          f"{n + '_work' if fused else '0'};" for n in FUSED], ""])
+        *[f"int (*const {n}_fn){sig} = {n if n in present else '0'};\nint (*const {n}_work_fn){wsig} = "
+          f"{n + '_work' if n in present else '0'};" for n in OPTIONAL], ""])
 
 
 class CompiledBackend:

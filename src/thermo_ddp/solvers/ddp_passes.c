@@ -24,15 +24,15 @@ KNOT_FUNCTION(ddp_local_knot)
 KNOT_FUNCTION(ddp_local_eval_knot)
 KNOT_FUNCTION(ddp_back_knot)
 KNOT_FUNCTION(ddp_back_terminal)
-KNOT_FUNCTION(ddp_grad_first_knot)
+KNOT_FUNCTION(ddp_grad_knot)
 KNOT_FUNCTION(ddp_fwd_knot)
 KNOT_FUNCTION(ddp_eval_knot)
 KNOT_FUNCTION(ddp_terminal)
 const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 
 /* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
- * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess);
- * ddp_grad_first_knot(a, x, u, p, lam, rho, policy): the first-order step from the first derivatives alone;
+ * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and of
+ * ddp_grad_knot(a, model, u, policy) -> (a_prev, stat), the first-order step with the gains of policy;
  * ddp_local_eval_knot(x, u, p, lam, rho, x_next): the same and the
  * knot's cost, g and gap (the first pass).
  * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
@@ -48,6 +48,11 @@ extern const int ddp_hess_size[];
  * the backward passes then call these alone. NULL (the _fn pointers) when not generated. */
 extern const knot_fn ddp_fused_step_fn, ddp_fused_eval_step_fn;
 extern const work_fn ddp_fused_step_work_fn, ddp_fused_eval_step_work_fn;
+/* A model whose first-order step is small also has it from the knot's first derivatives alone,
+ * ddp_grad_first_knot(a, x, u, p, lam, rho, policy) -> (a_prev, stat): the gradient pass then calls it
+ * instead of the local model and ddp_grad_knot. NULL when not generated. */
+extern const knot_fn ddp_grad_first_knot_fn;
+extern const work_fn ddp_grad_first_knot_work_fn;
 
 /* Work space of one solver: the knot functions' argument/result pointers and work arrays (sized by
  * their *_work functions), the problem's sizes and a terminal value vector. */
@@ -89,7 +94,7 @@ static size_t nnz(const casadi_int *sp) {
 }
 
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_policy, int pivot) {
-    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_first_knot_work,
+    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
@@ -97,6 +102,7 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_p
         grow(ddp_fused_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
         grow(ddp_fused_eval_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
     }
+    if (ddp_grad_first_knot_fn) grow(ddp_grad_first_knot_work_fn, &n_arg, &n_res, &n_iw, &n_w);
     for (int k = 0; k < ddp_n_hess; ++k) {
         grow(ddp_hess_work[k], &n_arg, &n_res, &n_iw, &n_w);
         n_hess += ddp_hess_size[k];
@@ -260,6 +266,24 @@ int ddp_evaluate_backward(Work *W, int N, const double *X, const double *U, cons
     return backward_sweep(W, N, X, U, P, Lam, LamN, NULL, rho, reg, policy, summary, values, J, G, GN, C);
 }
 
+/* The first-order step at knot t with the gains of policy[t]: costates[t] from costates[t+1], and its stationarity. */
+static int grad_knot(Work *W, int t, const double *X, const double *U, const double *P, const double *Lam,
+                     const double *policy, const double *rho, double *costates, double *stat) {
+    const double *a = costates + (size_t)(t + 1) * W->nx, *u = U + (size_t)t * W->nu;
+    const double *pol = policy + (size_t)t * W->n_policy;
+    int rc = 0;
+    if (!ddp_grad_first_knot_fn) {
+        rc = local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
+        W->arg[0] = a, W->arg[1] = W->model, W->arg[2] = u, W->arg[3] = pol;
+        W->res[0] = costates + (size_t)t * W->nx, W->res[1] = stat;
+        return rc ? rc : ddp_grad_knot(W->arg, W->res, W->iw, W->w, 0);
+    }
+    W->arg[0] = a, W->arg[1] = X + (size_t)t * W->nx, W->arg[2] = u, W->arg[3] = P + (size_t)t * W->np;
+    W->arg[4] = Lam + (size_t)t * W->ng, W->arg[5] = rho, W->arg[6] = pol;
+    W->res[0] = costates + (size_t)t * W->nx, W->res[1] = stat;
+    return ddp_grad_first_knot_fn(W->arg, W->res, W->iw, W->w, 0);
+}
+
 /* First-order pass with the gains of `policy`: costates (N+1, nx) and the largest stationarity. */
 int ddp_gradient(Work *W, int N, const double *X, const double *U, const double *P, const double *Lam,
                  const double *LamN, const double *policy, const double *rho, double *stat, double *costates) {
@@ -268,11 +292,7 @@ int ddp_gradient(Work *W, int N, const double *X, const double *U, const double 
     memcpy(costates + (size_t)N * W->nx, W->value_end, (size_t)W->nx * sizeof(double));
     *stat = 0.0;
     for (int t = N - 1; t >= 0 && !rc; --t) {
-        W->arg[0] = costates + (size_t)(t + 1) * W->nx, W->arg[1] = X + (size_t)t * W->nx;
-        W->arg[2] = U + (size_t)t * W->nu, W->arg[3] = P + (size_t)t * W->np, W->arg[4] = Lam + (size_t)t * W->ng;
-        W->arg[5] = rho, W->arg[6] = policy + (size_t)t * W->n_policy;
-        W->res[0] = costates + (size_t)t * W->nx, W->res[1] = &knot_stat;
-        rc = ddp_grad_first_knot(W->arg, W->res, W->iw, W->w, 0);
+        rc = grad_knot(W, t, X, U, P, Lam, policy, rho, costates, &knot_stat);
         *stat = knot_stat > *stat ? knot_stat : *stat;
     }
     return rc;
