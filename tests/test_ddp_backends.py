@@ -123,25 +123,29 @@ def test_second_order_chunks_reassemble_the_hessian(monkeypatch):
     _close(got, vm.backward(X, U, P, lam, lamN, C, RHO, 1.0))
 
 
-@pytest.mark.parametrize("limit", [0, 10**9], ids=["local_model_then_core", "one_reverse_sweep"])
-def test_both_compiled_first_order_passes_equal_numpy(monkeypatch, limit):
-    """The compiled gradient pass from the local model and ``ddp_grad_knot`` (a big model's: no extra C to
-    build) and from one reverse sweep of the knot's Lagrangian (a small model's) give numpy's costates."""
+@pytest.mark.parametrize("limit", [0, 10**9], ids=["big_model", "small_model"])
+def test_the_optional_compiled_knots_change_no_pass(monkeypatch, limit):
+    """A big model's compiled passes call only the knot functions the driver needs (the first pass: the
+    evaluation, then the local model; the first-order pass: the local model, then ``ddp_grad_knot``), a small
+    model's also the ones that share work (``ddp_local_eval_knot``, ``ddp_grad_first_knot``): numpy's passes either way."""
     import ctypes
 
     from thermo_ddp.solvers import _backends
-    monkeypatch.setattr(_backends, "FIRST_ORDER_MAX_INSTRUCTIONS", limit)
+    monkeypatch.setattr(_backends, "SMALL_KNOT_INSTRUCTIONS", limit)
     monkeypatch.setattr(_pass_cache, "key", lambda problem, settings: None)  # build, never the index's library
     problem, xs, us, P, _ = _pendulum()
     compiled = DDPSolver(problem, DDPSettings(backend="codegen")).backend
     numpy_ = DDPSolver(problem, DDPSettings(backend="numpy")).backend
-    assert bool(ctypes.c_void_p.in_dll(compiled._lib, "ddp_grad_first_knot_fn").value) == (limit > 0)
+    for name in ("ddp_local_eval_knot_fn", "ddp_grad_first_knot_fn"):
+        assert bool(ctypes.c_void_p.in_dll(compiled._lib, name).value) == (limit > 0)
     X, U = xs + 0.1, us - 0.5
     lam, lamN = np.full((problem.horizon, problem.n_constraints), 0.5), np.full(problem.n_terminal_constraints, 0.5)
-    C = numpy_.evaluate(X, U, P)[3]
-    policy, summary, _ = numpy_.backward(X, U, P, lam, lamN, C, RHO, 1.0)
+    (J, *evaluation), first_pass = compiled.evaluate_backward(X, U, P, lam, lamN, RHO, 1.0)
+    (J2, *evaluation2), first_pass2 = numpy_.evaluate_backward(X, U, P, lam, lamN, RHO, 1.0)
+    _close([J, *evaluation, *first_pass], [J2, *evaluation2, *first_pass2])
+    policy, summary, _ = first_pass2
     assert summary[3] > 0
     stat, costates = compiled.gradient(X, U, P, lam, lamN, policy, RHO)
-    assert stat > 1e-3  # not a stationary iterate: the pass has something to compare
     stat2, costates2 = numpy_.gradient(X, U, P, lam, lamN, policy, RHO)
+    assert stat2 > 1e-3  # not a stationary iterate: the pass has something to compare
     _close(([stat], costates), ([stat2], costates2))

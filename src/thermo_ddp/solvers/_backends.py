@@ -61,8 +61,8 @@ def knot_functions(problem, settings, layout, compiled: bool = False):
     knots["eval"], knots["end"] = _evaluation_knots(problem, x, u, p)
     small = len(knots["hess"]) == 1 and knots["hess"][0].n_instructions() <= FUSED_MAX_INSTRUCTIONS
     fused = _fused_knots(problem, settings, layout, knots) if compiled and small else []
-    first = [knots["grad_first"]] if knots["grad_first"].n_instructions() <= FIRST_ORDER_MAX_INSTRUCTIONS else []
-    knots["optional"] = fused + first if compiled else []
+    small_knot = compiled and knots["local"].n_instructions() <= SMALL_KNOT_INSTRUCTIONS
+    knots["optional"] = fused + (_run_time_knots(problem, layout, knots) if small_knot else [])
     return knots
 
 
@@ -89,15 +89,17 @@ def _fused_knots(problem, settings, layout, knots):
 
 
 # The knots the C driver calls (and "hess"): the local model, then the Riccati step or the first-order step.
-COMPILED = ("local", "local_eval", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
-# A model whose first-order step from one reverse sweep (``grad_first``) is at most this big also gets it compiled:
-# the driver's first-order pass calls it alone instead of the local model then ``grad_core`` (rk4_4 lift knot:
-# 1,918 against 2,380 instructions). Above it, its C costs more to build than it saves: the 7-joint arm's (38,407
-# instructions, a 0.9 MB C file) took 11.8 s of gcc, the arm's build 14.8 -> 21.9 s for a gradient pass that
-# runs a few times per solve.
-FIRST_ORDER_MAX_INSTRUCTIONS = 10_000
+COMPILED = ("local", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
+# A model whose local model is at most this big also gets the knot functions that only save run time, not
+# needed by the driver: the local model with the knot's evaluation (the first pass; else ``eval`` then ``local``)
+# and the first-order step from one reverse sweep of the knot's Lagrangian (else ``local`` then ``grad_core``;
+# rk4_4 lift knot: 1,918 against 2,380 instructions). The lift's local model has ~2,000 instructions, the 4-joint
+# arm's 22,809; the 7-joint arm's 78,348, where they cost more to build than they save: gcc took 11.8 s on the
+# one-sweep step's 0.9 MB of C alone (the arm's build 14.8 -> 21.9 s when it came) for a pass that runs a few
+# times per solve.
+SMALL_KNOT_INSTRUCTIONS = 30_000
 # Optional knot functions: the driver calls them through pointers, NULL when not generated.
-OPTIONAL = ("ddp_fused_step", "ddp_fused_eval_step", "ddp_grad_first_knot")
+OPTIONAL = ("ddp_fused_step", "ddp_fused_eval_step", "ddp_local_eval_knot", "ddp_grad_first_knot")
 MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
@@ -128,11 +130,7 @@ def _local_model_knot(problem, knots):
     entries = [[e for e in _nonzeros(m) if not e.is_constant()] for m in parts]
     packed_model = ca.vertcat(*[e for es in entries for e in es])
     local = _function("ddp_local_knot", [x, u, p, lam, rho], [packed_model], ["x", "u", "p", "lam", "rho"], ["model"])
-    F, xn = problem.functions, problem.functions.symbolic.sym("x_next", problem.nx)
-    knots["local_eval"] = _function(  # the first pass: the evaluation shares the dynamics with the derivatives
-        "ddp_local_eval_knot", [x, u, p, lam, rho, xn],
-        [packed_model, 0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn],
-        ["x", "u", "p", "lam", "rho", "x_next"], ["model", "cost", "g", "gap"])
+    knots["packed_model"] = packed_model
     packed = problem.functions.symbolic.sym("model", local.nnz_out(0))
     model_in, offset = {}, 0
     for name, m in zip(MODEL_PARTS, parts):
@@ -217,18 +215,30 @@ def _gradient_knot(problem, layout, knots, model_in, compiled):
     composed = None if compiled else ca.Function("ddp_grad_composed", [a, x, u, p, lam, rho, pol],
                            core(a, knots["local"](x, u, p, lam, rho), u, pol),
                            ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"], _CSE)
-    # The compiled pass: the same step from one reverse sweep of the knot's Lagrangian l + a'f, without the local
-    # model's Jacobians and Hessians (rk4_4 lift knot: 2,380 -> 1,918 instructions; rows composed with the step:
-    # 7,272 -> 2,964).
-    F, z = problem.functions, ca.vertcat(x, u)
+    return core, composed
+
+
+def _run_time_knots(problem, layout, knots):
+    """The optional compiled knot functions of a small model (see SMALL_KNOT_INSTRUCTIONS): the local model with
+    the knot's evaluation (the first pass: they share the dynamics), and the first-order step from one reverse
+    sweep of the knot's Lagrangian l + a'f, without the local model's Jacobians and Hessians (rk4_4 lift knot:
+    2,380 -> 1,918 instructions; rows composed with the step: 7,272 -> 2,964)."""
+    F, nx, sym = problem.functions, problem.nx, problem.functions.symbolic
+    x, u, p, lam, _, rho = knots["syms"]
+    xn, a, pol = sym.sym("x_next", nx), sym.sym("a", nx), sym.sym("policy", layout.n_policy)
+    evaluation = [0.5 * ca.sumsqr(F.stage_residual(x, u, p)), F.stage_constraint(x, u, p), F.step(x, u, p) - xn]
+    local_eval = _function("ddp_local_eval_knot", [x, u, p, lam, rho, xn], [knots["packed_model"], *evaluation],
+                           ["x", "u", "p", "lam", "rho", "x_next"], ["model", "cost", "g", "gap"])
+    z = ca.vertcat(x, u)
     lagrangian = 0.5 * ca.sumsqr(F.stage_residual(x, u, p)) + ca.dot(a, F.step(x, u, p))
     if problem.n_constraints:
         lagrangian += ca.sum1(phr(F.stage_constraint(x, u, p), lam, rho, ca.fmax))
     Lz = ca.gradient(lagrangian, z)
-    first = first_order_step(SymOps, Lz[:nx], Lz[nx:], K, u, ca.DM(problem.u_lb), ca.DM(problem.u_ub), problem.has_box)
-    knots["grad_first"] = _function("ddp_grad_first_knot", [a, x, u, p, lam, rho, pol], list(first),
-                                    ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"])
-    return core, composed
+    first = first_order_step(SymOps, Lz[:nx], Lz[nx:], layout.feedback(pol), u, ca.DM(problem.u_lb),
+                             ca.DM(problem.u_ub), problem.has_box)
+    grad_first = _function("ddp_grad_first_knot", [a, x, u, p, lam, rho, pol], list(first),
+                           ["a", "x", "u", "p", "lam", "rho", "policy"], ["a_prev", "stat"])
+    return [local_eval, grad_first]
 
 
 def _forward_knot(problem, layout, x, p):

@@ -21,7 +21,6 @@ typedef int (*work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
     int name(const double **arg, double **res, casadi_int *iw, double *w, int mem);             \
     int name##_work(casadi_int *sz_arg, casadi_int *sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 KNOT_FUNCTION(ddp_local_knot)
-KNOT_FUNCTION(ddp_local_eval_knot)
 KNOT_FUNCTION(ddp_back_knot)
 KNOT_FUNCTION(ddp_back_terminal)
 KNOT_FUNCTION(ddp_grad_knot)
@@ -33,8 +32,6 @@ const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 /* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
  * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and of
  * ddp_grad_knot(a, model, u, policy) -> (a_prev, stat), the first-order step with the gains of policy;
- * ddp_local_eval_knot(x, u, p, lam, rho, x_next): the same and the
- * knot's cost, g and gap (the first pass).
  * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
  * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
  * Gauss-Newton): the input hess of ddp_back_knot. */
@@ -48,11 +45,13 @@ extern const int ddp_hess_size[];
  * the backward passes then call these alone. NULL (the _fn pointers) when not generated. */
 extern const knot_fn ddp_fused_step_fn, ddp_fused_eval_step_fn;
 extern const work_fn ddp_fused_step_work_fn, ddp_fused_eval_step_work_fn;
-/* A model whose first-order step is small also has it from the knot's first derivatives alone,
- * ddp_grad_first_knot(a, x, u, p, lam, rho, policy) -> (a_prev, stat): the gradient pass then calls it
- * instead of the local model and ddp_grad_knot. NULL when not generated. */
-extern const knot_fn ddp_grad_first_knot_fn;
-extern const work_fn ddp_grad_first_knot_work_fn;
+/* A model with a small local model also has it with the knot's evaluation,
+ * ddp_local_eval_knot(x, u, p, lam, rho, x_next) -> (model, cost, g, gap), called by the first pass instead
+ * of ddp_eval_knot then ddp_local_knot, and the first-order step from the knot's first derivatives alone,
+ * ddp_grad_first_knot(a, x, u, p, lam, rho, policy) -> (a_prev, stat), called by the gradient pass instead
+ * of ddp_local_knot then ddp_grad_knot. NULL when not generated. */
+extern const knot_fn ddp_local_eval_knot_fn, ddp_grad_first_knot_fn;
+extern const work_fn ddp_local_eval_knot_work_fn, ddp_grad_first_knot_work_fn;
 
 /* Work space of one solver: the knot functions' argument/result pointers and work arrays (sized by
  * their *_work functions), the problem's sizes and a terminal value vector. */
@@ -94,7 +93,7 @@ static size_t nnz(const casadi_int *sp) {
 }
 
 Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_policy, int pivot) {
-    work_fn sizes[] = {ddp_local_knot_work, ddp_local_eval_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
+    work_fn sizes[] = {ddp_local_knot_work, ddp_back_knot_work, ddp_back_terminal_work, ddp_grad_knot_work,
                        ddp_fwd_knot_work, ddp_eval_knot_work, ddp_terminal_work};
     casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0, n_hess = 0;
     for (size_t i = 0; i < sizeof(sizes) / sizeof(sizes[0]); ++i) grow(sizes[i], &n_arg, &n_res, &n_iw, &n_w);
@@ -102,6 +101,7 @@ Work *ddp_work_new(int nx, int nu, int np, int ng, int ngN, int n_value, int n_p
         grow(ddp_fused_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
         grow(ddp_fused_eval_step_work_fn, &n_arg, &n_res, &n_iw, &n_w);
     }
+    if (ddp_local_eval_knot_fn) grow(ddp_local_eval_knot_work_fn, &n_arg, &n_res, &n_iw, &n_w);
     if (ddp_grad_first_knot_fn) grow(ddp_grad_first_knot_work_fn, &n_arg, &n_res, &n_iw, &n_w);
     for (int k = 0; k < ddp_n_hess; ++k) {
         grow(ddp_hess_work[k], &n_arg, &n_res, &n_iw, &n_w);
@@ -156,8 +156,12 @@ static int local_knot(Work *W, int t, const double *X, const double *U, const do
     W->arg[3] = Lam + (size_t)t * W->ng, W->arg[4] = rho, W->arg[5] = X + (size_t)(t + 1) * W->nx;
     W->res[0] = W->model;
     if (!cost) return ddp_local_knot(W->arg, W->res, W->iw, W->w, 0);
+    if (!ddp_local_eval_knot_fn) {
+        int rc = eval_knot(W, t, X, U, P, cost, G, C);
+        return rc ? rc : local_knot(W, t, X, U, P, Lam, rho, NULL, NULL, NULL);
+    }
     W->res[1] = cost, W->res[2] = G + (size_t)t * W->ng, W->res[3] = C + (size_t)t * W->nx;
-    return ddp_local_eval_knot(W->arg, W->res, W->iw, W->w, 0);
+    return ddp_local_eval_knot_fn(W->arg, W->res, W->iw, W->w, 0);
 }
 
 /* One Riccati step at knot t from the local model in W->model: values[t], policy[t] from values[t+1]
