@@ -34,7 +34,11 @@ Method (each part stated, as logged):
   curvature is about the row's current value, not its kink, so a row creeping toward its kink stalls |Qu|:
   after ``margin_release_steps`` full steps that each cut |Qu| by less than 10 %, such rows' multipliers are set
   to 0 (``DDPSolver._released``; measured on 11 longest-hold searches: 13 % fewer iterations, 11 % fewer
-  forward passes).
+  forward passes). With ``retry_crossed_rows``, on a gap-free iterate whose first ``CROSSED_TRIALS`` trial steps
+  were rejected and crossed, within the first ``CROSSED_REACH`` of their way, kinks of rows outside the model, the
+  direction is computed again with those rows active (curvature rho Jg'Jg, gradient (lam + rho g) Jg: a semismooth
+  Newton step with the trials' active set) and searched from a full step (``DDPSolver._step``; measured on 12
+  longest-hold searches: 12 % fewer forward passes, 5 % fewer iterations; benchmarks/README.md, passes7).
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36). With
@@ -61,19 +65,15 @@ Method (each part stated, as logged):
   no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
   progress is possible above rounding, and |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left
   lies along the penalty's large curvature; measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's
-  longest-hold probes, at costs of hundreds), the largest gap <=
-  ``gap_tolerance`` and
-  |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps closed) from an
-  iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by
-  a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
+  longest-hold probes, at costs of hundreds), the largest gap <= ``gap_tolerance`` and |max(g, -lam/rho)|_inf
+  <= ``constraint_tolerance``. After a full step (gaps closed) from an iterate with |Qu|_inf <= sqrt(``tolerance``),
+  |Qu|_inf of the new iterate is first measured by a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
   exactly where the full pass's Qu0 is): if within tolerance the solve stops there (K, k are then
   those of that last pass), otherwise a full backward pass follows as usual.
-- The first backward pass of a solve also evaluates the initial guess (cost, constraints, gaps)
-  in the same sweep over the knots.
-- Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result
-  (WarmStart.from_result shifts them); with multipliers the inner tolerance starts at
-  ``tolerance``. Measured: Gauss-Newton converges slowly when a heating term R(T) i^2 is
-  constrained (its curvature is in the dynamics); use ``full_second_order=True`` there.
+- The first backward pass of a solve also evaluates the initial guess in the same sweep over the knots.
+- Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result (WarmStart.from_result
+  shifts them); with multipliers the inner tolerance starts at ``tolerance``. Measured: Gauss-Newton converges
+  slowly when a heating term R(T) i^2 is constrained (its curvature is in the dynamics); use full DDP there.
 """
 from __future__ import annotations
 
@@ -98,6 +98,7 @@ log = logging.getLogger(__name__)
 BACKENDS = ("codegen", "casadi", "numpy")
 # The work of a solve, in SolverResult.info: backward (Riccati) passes, forward (rollout) passes of the line
 # search, first-order gradient passes, augmented-Lagrangian multiplier updates, releases of stalled margin rows.
+CROSSED_TRIALS, CROSSED_REACH = 2, 0.1  # retry_crossed_rows (measured best of 1-3 and 0.05-0.3; benchmarks/README)
 PASS_COUNTS = ("backward_passes", "forward_passes", "gradient_passes", "multiplier_updates", "margin_releases")
 _SRC = "DDPSettings"
 
@@ -133,6 +134,7 @@ class DDPSettings:
     infeasibility_growth: float = 1e3       # "infeasible": the violation not halved while rho grew this much
     active_margin: float = 0.0              # rows with lam > 0 within this of g = 0 get the penalty's curvature
     margin_release_steps: int = 3           # ... released after this many stalled full steps (0: never)
+    retry_crossed_rows: bool = False        # a new direction with the rows a cut-short line search crossed early
     box_iterations: int = 8                 # projected-Newton steps per knot at most (nu > 1; see _riccati)
     backend: str = "codegen"                # "codegen" (C via gcc), "casadi" (VM) or "numpy"
     compiler_flags: tuple = ("-O2", "-march=native")  # gcc; big generated files at -O1/-O0 (see codegen)
@@ -145,8 +147,7 @@ class DDPSettings:
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
                     "expected an integer >= 0")
         positive = ("tolerance", "decrement_tolerance", "flat_stationarity", "merit_resolution", "gap_tolerance",
-                    "constraint_tolerance",
-                    "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease", "penalty_init",
+                    "constraint_tolerance", "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease", "penalty_init",
                     "penalty_factor", "penalty_max", "line_search_min_step", "infeasibility_growth")
         for name in positive:
             v = getattr(self, name)
@@ -165,7 +166,7 @@ class DDPSettings:
                 (self.reg_init, self.reg_min), "expected reg_init <= reg_max and reg_min <= reg_max")
         require(self.penalty_init <= self.penalty_max, _SRC, "penalty_init", self.penalty_init,
                 "expected <= penalty_max")
-        for name in ("full_second_order", "pivot_jump"):
+        for name in ("full_second_order", "pivot_jump", "retry_crossed_rows"):
             require(isinstance(getattr(self, name), bool), _SRC, name, getattr(self, name), "expected True or False")
         require(self.backend in BACKENDS, _SRC, "backend", self.backend, f"expected one of {', '.join(BACKENDS)}")
         require(isinstance(self.compiler_flags, (tuple, list)) and all(isinstance(f, str) for f in self.compiler_flags),
@@ -361,23 +362,27 @@ class DDPSolver:
                 ws.stop("max_iterations", f"no convergence in {s.max_iterations} iterations")
                 break
             direction = self._direction(ws)
-            if direction is None or self._stopping(ws, direction) or self._released(ws, direction) \
-                    or not self._step(ws, direction):
+            if direction is None or self._stopping(ws, direction) or self._released(ws, direction):
                 continue
-            self._accepted(ws, direction, callback)
+            if (direction := self._step(ws, direction)) is not None:
+                self._accepted(ws, direction, callback)
         return self._finish(ws)
 
-    def _direction(self, ws: "_Workspace") -> "_Direction | None":
-        """Backward pass with regularisation; None after a failed pass (regularisation raised, or exhausted:
-        then the workspace is stopped)."""
+    def _direction(self, ws: "_Workspace", flags=None) -> "_Direction | None":
+        """Backward pass with regularisation; None after a failed pass (regularisation raised, or exhausted: then the
+        workspace is stopped). ``flags``: rows modelled as active (al.flagged; a failed pass then changes nothing)."""
         s = self.settings
         ws.counts["backward_passes"] += 1
         it_ = ws.it
-        policy, summary, values = ws.first or self.backend.backward(it_.X, it_.U, ws.P, ws.lam, ws.lamN, it_.C,
-                                                                    ws.rho, ws.reg)
+        lam, lamN = (ws.lam, ws.lamN) if flags is None else (al.flagged(ws.lam, flags[0]),
+                                                              al.flagged(ws.lamN, flags[1]))
+        policy, summary, values = ws.first or self.backend.backward(it_.X, it_.U, ws.P, lam, lamN, it_.C, ws.rho,
+                                                                    ws.reg)
         ws.first = None
         d1, d2, stat, pivot = summary
         if not (pivot > 0 and np.all(np.isfinite(summary))):
+            if flags is not None:
+                return None
             ws.reg = self._increase(ws.reg, policy)
             log.debug("iteration %d: backward pass failed (pivot %.2e), reg -> %.1e", ws.iteration, pivot, ws.reg)
             if ws.reg > s.reg_max:
@@ -421,13 +426,9 @@ class DDPSolver:
         return True
 
     def _released(self, ws: "_Workspace", d: "_Direction") -> bool:
-        """Rows kept in the local model by ``active_margin`` (lam > 0, inactive, within the margin of g = 0) get
-        the penalty's curvature about where they are, not about their kink: a row creeping toward its kink then
-        limits every step along it to about its gradient / rho, and |Qu| stalls. After ``margin_release_steps``
-        full steps at these multipliers that each cut |Qu| by less than 10 %, their multipliers are set to 0 (the
-        PHR estimate max(0, lam + rho g) of an inactive row: the kink moves by lam / rho) and the direction is
-        computed again (True). Measured on 11 longest-hold searches (benchmarks/README.md): one row stalled
-        the feasible probe of the 40 kg 140 °C search for 13 iterations, |Qu| 4.9e-3 -> 4.8e-3."""
+        """Rows kept in the model by ``active_margin`` can stall |Qu| (module docstring): after ``margin_release_steps``
+        full steps at these multipliers that each cut |Qu| by less than 10 %, their multipliers are set to 0 (the PHR
+        estimate of an inactive row: the kink moves by lam / rho) and the direction is computed again (True)."""
         s = self.settings
         n = s.margin_release_steps
         if not (s.active_margin > 0 and n and ws.inner >= n and all(a == 1.0 for a in ws.hist["alpha"][-n:])):
@@ -445,13 +446,24 @@ class DDPSolver:
         log.debug("iteration %d: |Qu| stalled at %.2e, %d margin rows released", ws.iteration, d.stat, band.sum())
         return True
 
-    def _step(self, ws: "_Workspace", d: "_Direction") -> bool:
-        """The line search along the direction; on failure the regularisation grows (False)."""
+    def _step(self, ws: "_Workspace", d: "_Direction") -> "_Direction | None":
+        """The line search along the direction (again along one with the rows crossed, ``retry_crossed_rows``: module
+        docstring; the next active set of a semismooth Newton step, Hintermueller, Ito & Kunisch, SIAM J. Optim.
+        2002); on failure the regularisation grows (None); else the direction taken."""
         s = self.settings
-        alpha, trial, ws.mu_gap, tries = self._line_search(ws.it, ws.P, d.policy, d.d1, d.d2, ws.lam, ws.lamN,
-                                                           ws.rho, ws.mu_gap, max(ws.recent, default=-np.inf))
-        ws.counts["forward_passes"] += tries
-        ws.tries = tries
+
+        def search(direction, cut=0, start=1.0):
+            return self._line_search(ws.it, ws.P, direction.policy, direction.d1, direction.d2, ws.lam, ws.lamN,
+                                     ws.rho, ws.mu_gap, max(ws.recent, default=-np.inf), cut, start)
+        cut = CROSSED_TRIALS if s.retry_crossed_rows and not ws.it.C.any() else 0
+        alpha, trial, ws.mu_gap, ws.tries, crossed = search(d, cut)
+        if trial is None and crossed is not None:
+            again = self._direction(ws, crossed)
+            if again is not None:  # the iterate's own figures; the new model's gradient is not the merit's
+                d = dataclasses.replace(again, stat=d.stat, flat=d.flat)
+            alpha, trial, ws.mu_gap, tries, _ = search(d, 0, 1.0 if again is not None else alpha)
+            ws.tries += tries
+        ws.counts["forward_passes"] += ws.tries
         if trial is None:
             if self._has_constraints and abs(d.d1) <= s.merit_resolution * (1.0 + abs(ws.it.J)):
                 ws.inner = s.inner_max_iterations  # no decrease left at this penalty: update the multipliers next
@@ -459,12 +471,12 @@ class DDPSolver:
             log.debug("iteration %d: line search failed, reg -> %.1e", ws.iteration, ws.reg)
             if ws.reg > s.reg_max:
                 ws.stop("line_search_failed", "no acceptable step up to reg_max")
-            return False
+            return None
         if s.nonmonotone_memory > 1 and not ws.it.C.any():
             merit = ws.it.J + ws.it.al_terms(ws.lam, ws.lamN, ws.rho)
             ws.recent = (ws.recent + [merit])[-(s.nonmonotone_memory - 1):]
         ws.it, ws.alpha = trial, alpha
-        return True
+        return d
 
     def _accepted(self, ws: "_Workspace", d: "_Direction", callback) -> None:
         """After an accepted step: regularisation schedule, history, callback and the first-order check of
@@ -518,10 +530,11 @@ class DDPSolver:
                 reg_new = max(reg_new, jump)
         return reg_new
 
-    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap, recent=-np.inf):
-        """Backtracking on the merit; returns (alpha, accepted iterate or None, gap penalty, forward passes).
+    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap, recent=-np.inf, cut=0, start=1.0):
+        """Backtracking on the merit from step ``start``; returns (alpha, accepted iterate or None, gap penalty,
+        forward passes, the rows the rejected trials crossed early outside the model (al.crossed; None: none)).
         ``recent``: the largest merit of the last iterates at these multipliers (nonmonotone reference, used
-        on gap-free iterates)."""
+        on gap-free iterates); ``cut`` > 0: stop after that many rejected trials once such rows were found."""
         s, be = self.settings, self.backend
         gap_l1 = float(np.sum(np.abs(it_.C)))
         if gap_l1 > 0:
@@ -530,7 +543,7 @@ class DDPSolver:
         merit0 = it_.J + it_.al_terms(lam, lamN, rho) + mu_gap * gap_l1
         noise = 1e-13 * (1.0 + abs(merit0))
         reference = max(merit0, recent) if gap_l1 == 0 else merit0
-        alpha, tries = 1.0, 0
+        alpha, tries, crossed = start, 0, None
         while alpha >= s.line_search_min_step:
             tries += 1
             X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
@@ -540,9 +553,15 @@ class DDPSolver:
                 model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
                 if merit - reference <= s.armijo * min(model, 0.0) + noise:
                     C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
-                    return alpha, _Iterate(X, U, J, G, GN, C, terms), mu_gap, tries
+                    return alpha, _Iterate(X, U, J, G, GN, C, terms), mu_gap, tries, crossed
+                if cut:
+                    rows = al.crossed(it_.G, it_.GN, G, GN, lam, lamN, rho, s.active_margin, CROSSED_REACH)
+                    if rows[0].any() or rows[1].any():
+                        crossed = rows if crossed is None else (crossed[0] | rows[0], crossed[1] | rows[1])
             alpha *= s.line_search_factor
-        return alpha, None, mu_gap, tries
+            if tries == cut and crossed is not None:
+                break
+        return alpha, None, mu_gap, tries, crossed
 
     def _result(self, it_, P, lam, lamN, rho, pol, status, message, iterations, start, hist,
                 counts: Mapping[str, int] | None = None, al_log=()) -> SolverResult:
