@@ -4,7 +4,8 @@ Every forward pass of every line search is recorded (the backend's ``forward`` i
 line search; nothing in the solver changes). For each rejected trial: its step alpha, whether the iterate still
 had dynamics gaps, and the constraint rows the trial found active (lam + rho g > 0) that the local model at the
 iterate did not contain (inactive there and not lam > 0 within ``active_margin`` of g = 0): the kinks the step
-crossed unmodelled. Printed per line search with more than one trial, then a summary.
+crossed unmodelled. Printed per line search with more than one trial, then a summary. With the lift's
+``retry_crossed_rows`` a search cut short after its first trial is followed by the search of the new direction.
 
     python benchmarks/trace_line_search.py [--payload-kg 40] [--limit-c 140]
 """
@@ -81,7 +82,8 @@ def main():
             shown = [f"a={t['alpha']:.3g}: {t['rows']} rows {','.join(t['names'])} knots {t['knots'][:4]}"
                      f"{' lam>0:%d' % t['lam_pos'] if t['lam_pos'] else ''}{' (gaps)' if t['gaps'] else ''}"
                      for t in (trials[:-1] if ok else trials)]
-            print(f"search {i}: {'took %.3g' % alpha if ok else 'FAILED'}; rejected " + "; ".join(shown))
+            outcome = f"took {alpha:.3g}" if ok else "no step (failed, or cut short for a new direction)"
+            print(f"search {i}: {outcome}; rejected " + "; ".join(shown))
     print(summary(searches))
 
 

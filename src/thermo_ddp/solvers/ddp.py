@@ -51,25 +51,24 @@ Method (each part stated, as logged):
   stalled probes of the lift's longest-hold search otherwise spent 14 forward passes per retry, raising
   the regularisation up to reg_max). Passes and updates are counted in ``SolverResult.info``
   (:data:`PASS_COUNTS`).
-- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
-  and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
-  of a too optimistic model); on a failed backward pass multiplied by ``reg_factor`` or, with
-  ``pivot_jump``, raised to at least rho_reg - 2p (p the non-positive pivot at the first failing
-  knot, the last in time; not beyond ``reg_max``), so that knot's pivot becomes >= |p| in one
-  retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
-  Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift
-  does: ``thermo_ddp.tasks.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the
-  Levenberg-Marquardt damping stalls Gauss-Newton on the multi-joint hold (300 iterations against
-  32), and the jump made receding-horizon re-solves near infeasibility fail more often.
-- Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
-  no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
-  progress is possible above rounding, and |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left
-  lies along the penalty's large curvature; measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's
-  longest-hold probes, at costs of hundreds), the largest gap <= ``gap_tolerance`` and |max(g, -lam/rho)|_inf
-  <= ``constraint_tolerance``. After a full step (gaps closed) from an iterate with |Qu|_inf <= sqrt(``tolerance``),
-  |Qu|_inf of the new iterate is first measured by a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
-  exactly where the full pass's Qu0 is): if within tolerance the solve stops there (K, k are then
-  those of that last pass), otherwise a full backward pass follows as usual.
+- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search, and in Gauss-Newton
+  mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping of a too optimistic model); on a failed
+  backward pass multiplied by ``reg_factor`` or, with ``pivot_jump``, raised to at least rho_reg - 2p (p the
+  non-positive pivot at the first failing knot, the last in time; not beyond ``reg_max``), so that knot's pivot
+  becomes >= |p| in one retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
+  Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift does:
+  ``thermo_ddp.tasks.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the Levenberg-Marquardt damping
+  stalls Gauss-Newton on the multi-joint hold (300 iterations against 32), and the jump made receding-horizon
+  re-solves near infeasibility fail more often.
+- Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with no regularisation, the
+  predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no progress is possible above rounding, and
+  |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left lies along the penalty's large curvature;
+  measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's longest-hold probes, at costs of hundreds), the
+  largest gap <= ``gap_tolerance`` and |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps
+  closed) from an iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by a
+  first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero exactly where the full
+  pass's Qu0 is): if within tolerance the solve stops there (K, k are then those of that last pass), otherwise a
+  full backward pass follows as usual.
 - The first backward pass of a solve also evaluates the initial guess in the same sweep over the knots.
 - Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result (WarmStart.from_result
   shifts them); with multipliers the inner tolerance starts at ``tolerance``. Measured: Gauss-Newton converges
@@ -90,6 +89,7 @@ from ..ocp import OptimalControlProblem
 from . import _augmented_lagrangian as al
 from ._backends import make_backend
 from ._layout import Layout
+from ._line_search import CROSSED_TRIALS, Iterate as _Iterate, backtrack
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
 from .result import HISTORY_KEYS, STATUSES, LazyKKT, SolverResult, WarmStart, constraint_violation
 
@@ -98,7 +98,6 @@ log = logging.getLogger(__name__)
 BACKENDS = ("codegen", "casadi", "numpy")
 # The work of a solve, in SolverResult.info: backward (Riccati) passes, forward (rollout) passes of the line
 # search, first-order gradient passes, augmented-Lagrangian multiplier updates, releases of stalled margin rows.
-CROSSED_TRIALS, CROSSED_REACH = 1, 0.1  # retry_crossed_rows (measured best of 1-3 and 0.02-0.3; benchmarks/README)
 PASS_COUNTS = ("backward_passes", "forward_passes", "gradient_passes", "multiplier_updates", "margin_releases")
 _SRC = "DDPSettings"
 
@@ -176,25 +175,6 @@ class DDPSettings:
     @classmethod
     def from_mapping(cls, values: Mapping, source: str = _SRC) -> "DDPSettings":
         return settings_from_mapping(cls, values, source)
-
-
-@dataclasses.dataclass
-class _Iterate:
-    """The accepted trajectory and its evaluations (solver workspace, never returned)."""
-
-    X: np.ndarray
-    U: np.ndarray
-    J: float
-    G: np.ndarray
-    GN: np.ndarray
-    C: np.ndarray
-    terms: float | None = None      # its augmented-Lagrangian terms at the current multipliers (None: not known)
-
-    def al_terms(self, lam, lamN, rho) -> float:
-        """The augmented-Lagrangian terms at (lam, lamN, rho), computed once per multiplier update."""
-        if self.terms is None:
-            self.terms = al.terms(self.G, self.GN, lam, lamN, rho)
-        return self.terms
 
 
 @dataclasses.dataclass(frozen=True)
@@ -452,17 +432,13 @@ class DDPSolver:
         2002); on failure the regularisation grows (None); else the direction taken."""
         s = self.settings
 
-        def search(direction, cut=0, start=1.0):
+        def search(direction, cut=0, start=1.0, floor=s.line_search_min_step):
             return self._line_search(ws.it, ws.P, direction.policy, direction.d1, direction.d2, ws.lam, ws.lamN,
-                                     ws.rho, ws.mu_gap, max(ws.recent, default=-np.inf), cut, start)
+                                     ws.rho, ws.mu_gap, max(ws.recent, default=-np.inf), cut, start, floor)
         cut = CROSSED_TRIALS if s.retry_crossed_rows and not ws.it.C.any() else 0
         alpha, trial, ws.mu_gap, ws.tries, crossed = search(d, cut)
         if trial is None and crossed is not None:
-            again = self._direction(ws, crossed)
-            if again is not None:  # the iterate's own figures; the new model's gradient is not the merit's
-                d = dataclasses.replace(again, stat=d.stat, flat=d.flat)
-            alpha, trial, ws.mu_gap, tries, _ = search(d, 0, 1.0 if again is not None else alpha)
-            ws.tries += tries
+            d, alpha, trial = self._retry(ws, d, alpha, crossed, search)
         ws.counts["forward_passes"] += ws.tries
         if trial is None:
             if self._has_constraints and abs(d.d1) <= s.merit_resolution * (1.0 + abs(ws.it.J)):
@@ -477,6 +453,23 @@ class DDPSolver:
             ws.recent = (ws.recent + [merit])[-(s.nonmonotone_memory - 1):]
         ws.it, ws.alpha = trial, alpha
         return d
+
+    def _retry(self, ws: "_Workspace", d: "_Direction", alpha: float, crossed, search):
+        """The direction with the ``crossed`` rows active, searched from a full step down to a half (the new model's
+        decrease is not the merit's); none taken, or no such direction: ``d``'s search goes on from ``alpha``.
+        Returns (direction, step, iterate or None); the trials are added to ``ws.tries``."""
+        kept = ws.policy, ws.values
+        again = self._direction(ws, crossed)
+        if again is not None:  # the iterate's own stopping figures
+            again = dataclasses.replace(again, stat=d.stat, flat=d.flat)
+            step, trial, ws.mu_gap, tries, _ = search(again, floor=0.5)
+            ws.tries += tries
+            if trial is not None:
+                return again, step, trial
+            ws.policy, ws.values = kept
+        alpha, trial, ws.mu_gap, tries, _ = search(d, 0, alpha)
+        ws.tries += tries
+        return d, alpha, trial
 
     def _accepted(self, ws: "_Workspace", d: "_Direction", callback) -> None:
         """After an accepted step: regularisation schedule, history, callback and the first-order check of
@@ -530,38 +523,9 @@ class DDPSolver:
                 reg_new = max(reg_new, jump)
         return reg_new
 
-    def _line_search(self, it_, P, policy, d1, d2, lam, lamN, rho, mu_gap, recent=-np.inf, cut=0, start=1.0):
-        """Backtracking on the merit from step ``start``; returns (alpha, accepted iterate or None, gap penalty,
-        forward passes, the rows the rejected trials crossed early outside the model (al.crossed; None: none)).
-        ``recent``: the largest merit of the last iterates at these multipliers (nonmonotone reference, used
-        on gap-free iterates); ``cut`` > 0: stop after that many rejected trials once such rows were found."""
-        s, be = self.settings, self.backend
-        gap_l1 = float(np.sum(np.abs(it_.C)))
-        if gap_l1 > 0:
-            need = (d1 + 0.5 * max(d2, 0.0)) / (0.9 * gap_l1)
-            mu_gap = max(mu_gap, need + 1e-8)
-        merit0 = it_.J + it_.al_terms(lam, lamN, rho) + mu_gap * gap_l1
-        noise = 1e-13 * (1.0 + abs(merit0))
-        reference = max(merit0, recent) if gap_l1 == 0 else merit0
-        alpha, tries, crossed = start, 0, None
-        while alpha >= s.line_search_min_step:
-            tries += 1
-            X, U, J, G, GN = be.forward(it_.X, it_.U, P, policy, it_.C, alpha)
-            if np.isfinite(J) and np.all(np.isfinite(X)):
-                terms = al.terms(G, GN, lam, lamN, rho)
-                merit = J + terms + mu_gap * (1 - alpha) * gap_l1
-                model = alpha * d1 + 0.5 * alpha ** 2 * d2 - alpha * mu_gap * gap_l1
-                if merit - reference <= s.armijo * min(model, 0.0) + noise:
-                    C = np.zeros_like(it_.C) if alpha == 1.0 else (1 - alpha) * it_.C
-                    return alpha, _Iterate(X, U, J, G, GN, C, terms), mu_gap, tries, crossed
-                if cut:
-                    rows = al.crossed(it_.G, it_.GN, G, GN, lam, lamN, rho, s.active_margin, CROSSED_REACH)
-                    if rows[0].any() or rows[1].any():
-                        crossed = rows if crossed is None else (crossed[0] | rows[0], crossed[1] | rows[1])
-            alpha *= s.line_search_factor
-            if tries == cut and crossed is not None:
-                break
-        return alpha, None, mu_gap, tries, crossed
+    def _line_search(self, *args, **kwargs):
+        """The line search (``_line_search.backtrack``) with this solver's settings and backend."""
+        return backtrack(self.settings, self.backend, *args, **kwargs)
 
     def _result(self, it_, P, lam, lamN, rho, pol, status, message, iterations, start, hist,
                 counts: Mapping[str, int] | None = None, al_log=()) -> SolverResult:
