@@ -123,8 +123,8 @@ def test_a_new_direction_with_the_rows_crossed_saves_forward_passes():
     settings = DDPSettings(backend="casadi", full_second_order=True, active_margin=1e-4, nonmonotone_memory=3)
     neighbour = DDPSolver(thermal_pendulum(t_max=36.0), settings).solve(x0_of(), GOAL)
     warm = WarmStart(neighbour.xs, neighbour.us)
-    runs = {retry: DDPSolver(problem, dataclasses.replace(settings, retry_crossed_rows=retry)).solve(x0_of(), GOAL, warm)
-            for retry in (False, True)}
+    runs = {retry: DDPSolver(problem, dataclasses.replace(settings, retry_crossed_rows=retry))
+            .solve(x0_of(), GOAL, warm) for retry in (False, True)}
     for res in runs.values():
         assert res.success, res.message
         assert abs(res.cost - ref.cost) <= 1e-4 * ref.cost and res.max_constraint_violation <= 1e-5
