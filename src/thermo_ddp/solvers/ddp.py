@@ -38,7 +38,7 @@ Method (each part stated, as logged):
   were rejected and crossed, within the first ``CROSSED_REACH`` of their way, kinks of rows outside the model, the
   direction is computed again with those rows active (curvature rho Jg'Jg, gradient (lam + rho g) Jg: a semismooth
   Newton step with the trials' active set) and searched from a full step (``DDPSolver._step``; measured on 12
-  longest-hold searches: 16 % fewer forward passes, 7 % fewer iterations; benchmarks/README.md, passes7).
+  longest-hold searches: 15 % fewer forward passes, 7 % fewer iterations; benchmarks/README.md, passes7).
 - Line search: backtracking (factor 1/2) on the merit phi = cost + AL terms + mu |gaps|_1,
   Armijo test against the quadratic model alpha d1 + alpha^2 d2 / 2 - alpha mu |gaps|_1;
   mu grows as needed to make the step a descent direction (Nocedal & Wright eq. 18.36). With

@@ -73,7 +73,7 @@ SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # longest-hold search from 146 to 95 iterations.
 # The active margin and the nonmonotone line search (3 iterates) took the default searches from 2.3-3.3 to
 # 1.4-1.5 forward passes per iteration, with no failed line search (benchmarks/README.md, issue 23); the retry
-# with the rows a line search crossed 220 -> 155 forward passes at 140 °C (passes7).
+# with the rows a line search crossed 220 -> 156 forward passes at 140 °C (passes7).
 # The knots compiled with codegen.REASSOCIATING_FLAGS: passes ~25 % faster, the same iterates to rounding.
 DDP_OPTIONS = DDPSettings(full_second_order=True, inner_tolerance_init=0.1, inner_tolerance_factor=0.3,
                           inner_max_iterations=20, reg_decrease=10.0 ** 0.5, pivot_jump=True, active_margin=1e-4,
