@@ -113,3 +113,30 @@ def test_a_row_with_a_multiplier_just_short_of_its_kink_gets_the_penalty_curvatu
     assert float(luu[1e-4](short, [0.0, 0.0], rho_v)) == pytest.approx(1.0)          # no multiplier
     assert float(luu[1e-4](1.0 - 1e-3, [0.5, 0.0], rho_v)) == pytest.approx(1.0)     # beyond the margin
     assert float(luu[0.0](1.0 + 1e-3, [0.0, 0.0], rho_v)) == pytest.approx(1.0 + 1e4)  # violated: active
+
+
+def test_a_flagged_row_is_modelled_by_its_quadratic_piece():
+    """knot_model with a negative multiplier entry -m (al.flagged): the row is modelled as active wherever it is,
+    curvature rho and gradient (m + rho g) (a semismooth Newton step with that active set); unflagged it has
+    neither while inactive. al.crossed finds the rows a trial made active only when the kink lies early on its way."""
+    import types
+
+    import casadi as ca
+
+    from thermo_ddp.solvers._riccati import knot_model
+
+    x, u, p = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p")
+    F = types.SimpleNamespace(stage_residual=lambda x, u, p: u, stage_constraint=lambda x, u, p: u - 1,
+                              step=lambda x, u, p: x + u, step_jacobians=None)
+    lam, rho = ca.SX.sym("lam"), ca.SX.sym("rho")
+    m = knot_model(F, x, u, p, lam, rho, False)
+    f = ca.Function("f", [u, lam, rho], [m["lu"], m["luu"]])
+    g, r = 0.9 - 1, 1e3
+    assert [float(v) for v in f(0.9, 0.0, r)] == pytest.approx([0.9, 1.0])  # inactive: the cost only
+    flagged = float(al.flagged(np.array([[0.0]]), np.array([[True]]))[0, 0])
+    assert flagged < 0
+    assert [float(v) for v in f(0.9, flagged, r)] == pytest.approx([0.9 + r * g, 1.0 + r])
+    assert [float(v) for v in f(0.9, -20.0, r)] == pytest.approx([0.9 + 20.0 + r * g, 1.0 + r])  # with m = 20
+    G, trial = np.array([[-0.1], [-0.1]]), np.array([[0.5], [0.01]])  # kinks at 1/6 and 10/11 of the way
+    early, _ = al.crossed(G, np.zeros(0), trial, np.zeros(0), np.zeros((2, 1)), np.zeros(0), np.array([r]), 0.0, 0.2)
+    assert early[:, 0].tolist() == [True, False]

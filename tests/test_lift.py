@@ -198,12 +198,12 @@ def test_default_searches_take_few_solves_and_few_forward_passes(default_plan):
     """Issue 23: the longest hold bracketed by a feasible hold and an infeasible one a knot longer, the latter
     solved from the former's plan and multipliers, in 3 solves (the first probe's replay, biased by half its
     distance, places the second on the boundary; 4 at 84 °C with a 1-knot bias) and fewer than 140 DDP
-    iterations (measured 97 and 134, 141 before stalled margin rows were released), with at most 1.7 forward
-    passes (line-search trials) per iteration and 225 in all over the whole search (measured 1.43 and 1.64: 139
-    and 220 passes; benchmarks/README.md)."""
+    iterations (measured 98 and 110), with at most 1.5 forward passes (line-search trials) per iteration and
+    180 in all over the whole search (measured 1.35 and 1.42: 132 and 156 passes; 1.43 and 1.64, 139 and 220,
+    before the line search's rows crossed went into a new direction; benchmarks/README.md, passes7)."""
     work = default_plan.solver["work"]
     assert default_plan.solver["solves"] <= 3 and default_plan.solver["attempts"] == ["ddp"]
-    assert work["iterations"] < 140 and work["forward_passes"] <= min(1.7 * work["iterations"], 225)
+    assert work["iterations"] < 140 and work["forward_passes"] <= min(1.5 * work["iterations"], 180)
 
 
 def test_released_margin_rows_save_iterations_at_the_same_optimum():

@@ -43,6 +43,25 @@ def kkt_constraint(G, GN, lam, lamN, rho) -> float:
     return float(max(vals))
 
 
+def crossed(G, GN, G_trial, GN_trial, lam, lamN, rho, margin: float, reach: float = 1.0):
+    """The rows (stage (N, ng), terminal (ngN)) active at a trial point (lam + rho g > 0) but not in the local
+    model at the iterate (there inactive, and not lam > 0 within ``margin`` of g = 0), whose kink g = -lam/rho
+    lies within the first ``reach`` of the way from the iterate to the trial (g linear in between): the kinks a
+    step crossed early that its model did not have."""
+    rg, rN = split(rho, G)
+
+    def rows(g, g_trial, lm, r):
+        early = (-lm / r - g) <= reach * (g_trial - g)
+        return (lm + r * g_trial > 0) & ~((lm + r * g > 0) | ((lm > 0) & (g > -margin))) & early
+    return rows(G, G_trial, lam, rg), rows(GN, GN_trial, lamN, rN)
+
+
+def flagged(lam, flags):
+    """The multipliers as the backward pass takes them: a row of ``flags`` is modelled as active whatever its
+    value, marked by the sign, -max(lam, tiny) (_riccati.knot_model). Never for the gradient pass."""
+    return lam if flags is None else np.where(flags, -np.maximum(lam, np.finfo(float).tiny), lam)
+
+
 def row_violation(G, GN) -> np.ndarray:
     """The largest violation max(g, 0) of every row (stage rows over the knots, then terminal rows)."""
     stage = np.max(np.maximum(G, 0.0), axis=0) if G.size else np.zeros(G.shape[-1] if G.ndim == 2 else 0)

@@ -262,7 +262,10 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False, margin:
     when it is within ``margin`` (its own units) of its kink, g > -lam/rho - margin: a step that crosses the kink
     of a row just short of it meets the penalty's curvature rho, which the model otherwise misses (measured on
     the lift's probes at rho = 1e5: a row 8e-7 short of its kink made a descent direction fail every step
-    down to 1e-4, ten regularisation increases of 14 forward passes each).
+    down to 1e-4, ten regularisation increases of 14 forward passes each). A negative entry -m of ``lam`` marks a
+    row (multiplier m) modelled as active whatever its value: curvature rho Jg'Jg and the gradient (m + rho g) Jg
+    of its quadratic piece (a semismooth Newton step with that active set; the rows a line search crossed,
+    ``_augmented_lagrangian.flagged``, DDPSolver._step).
     """
     z = x if terminal else ca.vertcat(x, u)
     if terminal:
@@ -274,8 +277,9 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False, margin:
     hess = ca.hessian(0.5 * ca.sumsqr(r), z)[0] if full else Jr.T @ Jr
     if g.numel():
         Jg = ca.jacobian(g, z)
-        mult = ca.fmax(0, lam + rho * g)
-        active = ca.logic_or(lam + rho * g > 0, ca.logic_and(lam > 0, g > -margin))
+        flagged, lam = lam < 0, ca.fabs(lam)  # a negative entry: a row modelled as active (see docstring)
+        mult = ca.if_else(flagged, lam + rho * g, ca.fmax(0, lam + rho * g))
+        active = ca.logic_or(ca.logic_or(lam + rho * g > 0, flagged), ca.logic_and(lam > 0, g > -margin))
         grad += Jg.T @ mult
         hess += Jg.T @ ca.diag(rho * active) @ Jg
         if full:

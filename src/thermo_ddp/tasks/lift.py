@@ -72,11 +72,12 @@ SOLVERS = {"ddp": DDPSolver, "ipopt": IpoptSolver, "fatrop": FatropSolver}
 # at most), a slower regularisation decrease and the pivot jump cut the infeasible probe of the
 # longest-hold search from 146 to 95 iterations.
 # The active margin and the nonmonotone line search (3 iterates) took the default searches from 2.3-3.3 to
-# 1.4-1.5 forward passes per iteration, with no failed line search (benchmarks/README.md, issue 23).
+# 1.4-1.5 forward passes per iteration, with no failed line search (benchmarks/README.md, issue 23); the retry
+# with the rows a line search crossed 220 -> 156 forward passes at 140 °C (passes7).
 # The knots compiled with codegen.REASSOCIATING_FLAGS: passes ~25 % faster, the same iterates to rounding.
 DDP_OPTIONS = DDPSettings(full_second_order=True, inner_tolerance_init=0.1, inner_tolerance_factor=0.3,
                           inner_max_iterations=20, reg_decrease=10.0 ** 0.5, pivot_jump=True, active_margin=1e-4,
-                          nonmonotone_memory=3,
+                          nonmonotone_memory=3, retry_crossed_rows=True,
                           compiler_flags=(*DDPSettings().compiler_flags, *codegen.REASSOCIATING_FLAGS))
 # Careful motion off, no margin: with it the 40 kg 84 °C search took 7 solves, 964 iterations and an IPOPT rung,
 # without 4 solves and 291 iterations, the same hold (benchmarks/README.md, issue 23).
