@@ -14,8 +14,8 @@ All are built from the same six per-knot CasADi functions (``knot_functions``). 
 only those (one C file each) and loops them over the horizon in a hand-written C driver
 (solvers/ddp_passes.c, called through ctypes on the arrays' memory): the library depends on the
 problem's structure, not on N, so a new horizon compiles nothing. "casadi" maps them over the horizon
-in the CasADi VM (mapaccum: one call per pass). "numpy" runs the Riccati recursion and the rollout as
-numpy loops. A backward pass stops at the first (latest) knot with a non-positive pivot in "codegen"
+in the CasADi VM (mapaccum: one call per pass). "numpy" (solvers/_numpy_backend.py) runs the Riccati
+recursion and the rollout as numpy loops. A backward pass stops at the first (latest) knot with a non-positive pivot in "codegen"
 and "numpy" (earlier knots get pivot -1); "casadi" runs on. A row-per-knot C array is exactly
 CasADi's column-major (dim, knots) matrix, so no backend copies the trajectories.
 """
@@ -33,7 +33,7 @@ from .. import codegen
 from . import _pass_cache
 from ._augmented_lagrangian import phr
 from ._layout import Layout
-from ._riccati import NumpyOps, SymOps, backward_step, first_order_step, gradient_step, knot_model
+from ._riccati import SymOps, backward_step, first_order_step, gradient_step, knot_model
 
 log = logging.getLogger(__name__)
 # Common-subexpression elimination in the per-knot functions: the dynamics, its Jacobians and its
@@ -506,113 +506,3 @@ def _bind(library: ctypes.CDLL) -> None:
         fn.restype = ctypes.c_int
         fn.argtypes = [ptr, ctypes.c_int] + [ptr] * arrays + [dbl] * doubles + [ptr] * outputs
     library._ddp_bound = True
-
-
-class NumpyBackend:
-    """Fallback: derivatives in one batched CasADi call (map), Riccati and rollout as numpy loops."""
-
-    name = "numpy"
-
-    def __init__(self, problem, settings, layout):
-        knots = knot_functions(problem, settings, layout)
-        self.problem, self.settings, self.layout = problem, settings, layout
-        self._n_rho = problem.n_constraints + problem.n_terminal_constraints
-        self._eval = knots["eval"].map(problem.horizon)
-        self._fwd, self._end = knots["fwd"], knots["end"]
-        model, (x, u, p, lam, _, rho) = knots["model"], knots["syms"]
-        names = ["A", "B", "lx", "lu", "lxx", "luu", "lux"]
-        outs = [ca.densify(model[n]) for n in names]
-        self._names = names
-        self._second = None
-        if knots["second"] is not None:
-            v_sym, hxx, huu, hux = knots["second"]
-            self._second = ca.Function("second", [x, u, p, v_sym], [hxx, huu, hux])
-        derivs = ca.Function("derivs", [x, u, p, lam, rho], [ca.vec(o) for o in outs])
-        self._derivs = derivs.map(problem.horizon)
-        self._shapes = [o.shape for o in outs]
-        self._terminal = knots["terminal"]
-
-    def _knot_data(self, X, U, P, Lam, LamN, rho):
-        """Per-knot derivatives (name -> (N, ...) arrays) and the terminal value S_N (arguments transposed)."""
-        N = self.problem.horizon
-        ng, rho = self.problem.n_constraints, penalties(self._n_rho, rho)
-        mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho[:ng])]
-        data = {n: m.T if n in ("lx", "lu") else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
-                for m, s, n in zip(mats, self._shapes, self._names)}
-        return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho[ng:])).ravel()
-
-    def evaluate_backward(self, X, U, P, Lam, LamN, rho, reg):
-        evaluation = self.evaluate(X, U, P)
-        return evaluation, self.backward(X, U, P, Lam, LamN, evaluation[3], rho, reg)
-
-    def gradient(self, X, U, P, Lam, LamN, policy, rho):
-        X, U, P, Lam = X.T, U.T, P.T, Lam.T
-        pr, lay, N, nx = self.problem, self.layout, self.problem.horizon, self.problem.nx
-        data, S = self._knot_data(X, U, P, Lam, LamN, rho)
-        costates = np.zeros((N + 1, nx))
-        costates[N] = a = S[:nx]
-        stat = 0.0
-        for t in reversed(range(N)):
-            K = lay.feedback(policy[t])
-            a, st = gradient_step(NumpyOps, {n: d[t] for n, d in data.items()}, a, K, U[:, t], pr.u_lb, pr.u_ub,
-                                  pr.has_box)
-            costates[t], stat = a, max(stat, st)
-        return stat, costates
-
-    def backward(self, X, U, P, Lam, LamN, C, rho, reg):
-        X, U, P, Lam, C = X.T, U.T, P.T, Lam.T, C.T
-        pr, lay, N, nx = self.problem, self.layout, self.problem.horizon, self.problem.nx
-        data, S = self._knot_data(X, U, P, Lam, LamN, rho)
-        a, b, Vxx = S[:nx], S[nx: 2 * nx], S[2 * nx:].reshape(nx, nx).T
-        policy = np.zeros((lay.n_policy, N))
-        values = np.zeros((lay.n_value, N + 1))
-        values[:, N] = S
-        for t in reversed(range(N)):
-            model = {n: d[t] for n, d in data.items()}
-            if self._second is not None:
-                model["second_order"] = self._second_order(X[:, t], U[:, t], P[:, t])
-            st = backward_step(NumpyOps, model, a, b, Vxx, C[:, t], U[:, t], pr.u_lb, pr.u_ub, reg,
-                               self.settings.box_iterations, pr.has_box)
-            a, b, Vxx = st["a"], st["b"], st["Vxx"]
-            values[:, t] = lay.pack_value(a, b, Vxx)
-            policy[:, t] = lay.pack_policy(st)
-            if st["pivot"] <= 0:
-                policy[lay.pivot, :t] = -1.0
-                break
-        col = lay.column
-        summary = np.array([policy[col("d1")].sum(), policy[col("d2")].sum(), policy[col("stationarity")].max(),
-                            policy[col("pivot")].min()])
-        return policy.T.copy(), summary, values.T.copy()
-
-    def _second_order(self, x, u, p):
-        return lambda v: tuple(np.asarray(h) for h in self._second(x, u, p, v))
-
-    def forward(self, X, U, P, policy, C, alpha):
-        X, U, P, policy, C = X.T, U.T, P.T, policy.T, C.T
-        N = self.problem.horizon
-        Xn, Un = np.empty_like(X), np.empty_like(U)
-        G = np.empty((self.problem.n_constraints, N))
-        Xn[:, 0], J = X[:, 0], 0.0
-        for t in range(N):
-            x_next, u, cost, g = (v.full().ravel() for v in
-                                  self._fwd(Xn[:, t], X[:, t], U[:, t], policy[:, t], C[:, t], P[:, t], alpha))
-            Xn[:, t + 1], Un[:, t], G[:, t] = x_next, u, g
-            J += float(cost[0])
-        costN, gN = self._end(Xn[:, N], P[:, N])
-        return Xn.T.copy(), Un.T.copy(), J + float(costN), G.T.copy(), gN.full().ravel()
-
-    def evaluate(self, X, U, P):
-        N = self.problem.horizon
-        cost, G, C = self._eval(X[:N].T, U.T, P[:N].T, X[1:].T)
-        costN, gN = self._end(X[N], P[N])
-        return float(cost.full().sum() + costN), G.full().T.copy(), gN.full().ravel(), C.full().T.copy()
-
-
-def make_backend(problem, settings, layout):
-    if settings.backend == "numpy":
-        return NumpyBackend(problem, settings, layout)
-    if settings.backend == "codegen":
-        library = compiled_library(problem, settings, layout)
-        if library is not None:
-            return CompiledBackend(problem, library, layout)
-    return CasadiBackend(problem, settings, layout)

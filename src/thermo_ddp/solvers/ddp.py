@@ -92,9 +92,10 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
 from . import _augmented_lagrangian as al
-from ._backends import make_backend
+from ._backends import CasadiBackend, CompiledBackend, compiled_library
 from ._layout import Layout
 from ._line_search import CROSSED_TRIALS, Iterate as _Iterate, backtrack
+from ._numpy_backend import NumpyBackend
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
 from .result import HISTORY_KEYS, STATUSES, LazyKKT, SolverResult, WarmStart, constraint_violation
 
@@ -275,7 +276,7 @@ class DDPSolver:
         self._ng, self._ngN = problem.n_constraints, problem.n_terminal_constraints  # sizes, computed once
         self._has_constraints = self._ng + self._ngN > 0
         start = time.perf_counter()
-        self.backend = make_backend(problem, settings, self.layout)
+        self.backend = _backend(problem, settings, self.layout)
         self.kkt, self._rows = KKTEvaluator(problem), constraint_rows(problem)
         self.build_s = time.perf_counter() - start
         log.info("DDP built for %s (nx=%d nu=%d N=%d) in %.2f s: backend %s, %s, multiple shooting (gaps), "
@@ -573,3 +574,14 @@ class DDPSolver:
                             iterations=iterations, solve_s=solve_s, K=K, k=k, multipliers=mult, history=hist,
                             info={"backend": self.backend.name, **(counts or dict.fromkeys(PASS_COUNTS, 0)),
                                   "full_second_order": self.settings.full_second_order})
+
+
+def _backend(problem, settings: DDPSettings, layout: Layout):
+    """The passes of ``settings.backend``; "codegen" without a compiler falls back to the VM (with a warning)."""
+    if settings.backend == "numpy":
+        return NumpyBackend(problem, settings, layout)
+    if settings.backend == "codegen":
+        library = compiled_library(problem, settings, layout)
+        if library is not None:
+            return CompiledBackend(problem, library, layout)
+    return CasadiBackend(problem, settings, layout)
