@@ -127,7 +127,8 @@ def test_second_order_chunks_reassemble_the_hessian(monkeypatch):
 def test_the_optional_compiled_knots_change_no_pass(monkeypatch, limit):
     """A big model's compiled passes call only the knot functions the driver needs (the first pass: the
     evaluation, then the local model; the first-order pass: the local model, then ``ddp_grad_knot``), a small
-    model's also the ones that share work (``ddp_local_eval_knot``, ``ddp_grad_first_knot``): numpy's passes either way."""
+    model's also the ones that share work (``ddp_local_eval_knot``, ``ddp_grad_first_knot``): numpy's passes
+    either way."""
     import ctypes
 
     from thermo_ddp.solvers import _backends

@@ -15,8 +15,8 @@ only those (one C file each) and loops them over the horizon in a hand-written C
 (solvers/ddp_passes.c, called through ctypes on the arrays' memory): the library depends on the
 problem's structure, not on N, so a new horizon compiles nothing. "casadi" maps them over the horizon
 in the CasADi VM (mapaccum: one call per pass). "numpy" (solvers/_numpy_backend.py) runs the Riccati
-recursion and the rollout as numpy loops. A backward pass stops at the first (latest) knot with a non-positive pivot in "codegen"
-and "numpy" (earlier knots get pivot -1); "casadi" runs on. A row-per-knot C array is exactly
+recursion and the rollout as numpy loops. A backward pass stops at the first (latest) knot with a
+non-positive pivot in "codegen" and "numpy" (earlier knots get pivot -1); "casadi" runs on. A row-per-knot C array is exactly
 CasADi's column-major (dim, knots) matrix, so no backend copies the trajectories.
 """
 from __future__ import annotations
