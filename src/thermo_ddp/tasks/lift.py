@@ -253,7 +253,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     terminal_costs = (
         Cost("terminal_tracking", 1.0, terminal("terminal_tracking", par["sqrt_tracking_weight"] * (q - start))),
         Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
-    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"])
+    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"],
+                                     x_next=step(x, u, env))
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
         Constraint("hold_band", stage("hold_band", ca.vertcat(par["hold_flag"] * (q - goal) - tol,
                                                              par["hold_flag"] * (goal - q) - tol), "g")),
