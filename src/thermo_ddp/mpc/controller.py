@@ -439,28 +439,30 @@ class RecedingHorizonController:
         :func:`thermo_ddp.tasks.constraints.bus_voltage`), and whether it was moved: the drive cannot apply more,
         so it has the last word, over the range guard's brake (a fallback's stale current, or a plan's first
         current from an estimate the plan did not see). See :meth:`_guard`."""
-        return self._guard(x, current, self._bus_envelope)
+        return self._guard(x, current, self._bus_envelope, about_current=True)
 
-    def _guard(self, x: np.ndarray, current: np.ndarray, rows) -> tuple[np.ndarray, bool]:
+    def _guard(self, x: np.ndarray, current: np.ndarray, rows, about_current: bool = False) -> tuple[np.ndarray, bool]:
         """``current`` clipped, per joint, to the interval where its ``rows(x, u, params)`` (per joint, <= 0 inside)
-        hold. The rows are affine in each joint's own current over one step (evaluated at 0 and 1 A, the window's
-        first row); a joint whose rows cannot all be met gets the current of its most violated row's bound."""
+        hold. The rows are affine in each joint's own current over one step (evaluated at 0 and 1 A, or, with
+        ``about_current``, at ``current`` and 1 A more; the window's first row); a joint whose rows cannot all be
+        met gets the current of its most violated row's bound."""
         x = np.asarray(x, float)
         params = self.window()[0]
         n = self.lp.model.nu
-        base = rows(x, np.zeros(n), params)
         out = np.array(current, dtype=float).reshape(-1)
+        at = self._clip(out) if about_current else np.zeros(n)
+        base = rows(x, at, params)
         for j in range(n):
             one = np.zeros(n)
             one[j] = 1.0
-            slope = rows(x, one, params)[j] - base[j]
-            bounds = -base[j] / np.where(slope != 0, slope, np.nan)
+            slope = rows(x, at + one, params)[j] - base[j]
+            bounds = at[j] - base[j] / np.where(slope != 0, slope, np.nan)
             upper = bounds[slope > 0].min(initial=np.inf)
             lower = bounds[slope < 0].max(initial=-np.inf)
             if lower <= upper:
                 out[j] = np.clip(out[j], lower, upper)
             else:   # no current meets every row: the bound of the row most violated at the present current
-                worst = int(np.argmax(base[j] + slope * out[j]))
+                worst = int(np.argmax(base[j] + slope * (out[j] - at[j])))
                 out[j] = bounds[worst] if np.isfinite(bounds[worst]) else out[j]
         out = self._clip(out)
         return out, bool(np.any(np.abs(out - np.asarray(current, float).reshape(-1)) > 1e-9))
