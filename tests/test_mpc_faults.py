@@ -10,6 +10,7 @@ import pytest
 
 from thermo_ddp.mpc import (ExtendedKalmanFilter, FaultySolver, MPCSettings, RecedingHorizonController, build_models,
                             mpc_solver, planning_problem, run_closed_loop, stuck_run_length)
+from thermo_ddp.mpc.plant import Plant
 from thermo_ddp.studies.sweep import robustness_sweep
 from thermo_ddp.tasks.limits import joint_range_rad
 
@@ -266,6 +267,9 @@ def test_bus_voltage_is_kept_over_the_whole_period():
     x = model.state(q=[-1.25], v=[-2.31], temperatures_c=np.full(model.nx - 2, 60.0))
     volts = _period_voltage_v(model, settings, x, -20.0)
     assert abs(volts[0]) < bus_v - 4 and abs(volts).max() > bus_v + 6      # under at the start, over at the end
+    plant = Plant(model, x, settings, np.random.default_rng(0))             # what the closed loop counts
+    plant.apply([-20.0])
+    assert plant.period_voltage_v[0] == pytest.approx(abs(volts).max(), abs=1e-9)
     rows = next(c for c in lp.problem.constraints if c.name == "bus_voltage").function(x, -20.0, controller.window()[0])
     assert abs(float(np.max(rows)) - (abs(volts).max() - bus_v)) < 0.05    # the rows see the period's peak
 

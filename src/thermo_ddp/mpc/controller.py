@@ -13,10 +13,12 @@ too late; it is discarded), also leads to that fallback, and the period says so 
 Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
 planning state's winding is at the planning limit; the range guard (:meth:`RecedingHorizonController.range_guard`)
 then brakes a fallback's current, and every current from the lowering's start on, into the ``stop_approach``
-envelope toward the joint's stops, over the derating. While the lowering lies ahead, its knots' winding limit is
-lowered by ``lowering_reserve_c`` (the hold keeps the lowering's heat). ``tightening_c`` raises every thermal node of
-the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
-time constant of tens of minutes this tightens the limit by about as much over the whole window.
+envelope toward the joint's stops, over the derating; the voltage guard
+(:meth:`RecedingHorizonController.voltage_guard`) keeps every period's voltage under the bus, over both. While the
+lowering lies ahead, its knots' winding limit is lowered by ``lowering_reserve_c`` (the hold keeps the lowering's
+heat). ``tightening_c`` raises every thermal node of the planning state (the estimate) by that many kelvin: with a
+nearly linear network and a casing time constant of tens of minutes this tightens the limit by about as much over
+the whole window.
 
 With ``settings.controller.robust_uncertainty`` the hold is also kept safe for every motor of an uncertainty
 set (:mod:`thermo_ddp.mpc.robust`).

@@ -7,6 +7,7 @@ import collections
 import dataclasses
 from typing import Mapping
 
+import casadi as ca
 import numpy as np
 
 from ..model.actuated import ActuatedArm
@@ -79,6 +80,10 @@ class Plant:
         self._delivered: np.ndarray | None = None
         self._stuck: np.ndarray | None = None
         self.peak_winding_c = float(np.max(self.x[self._winding]))
+        outputs = model.outputs.map(settings.plant.plant_substeps + 1)
+        self._voltages = ca.Function("period_voltages", outputs.mx_in(),
+                                     [outputs(*outputs.mx_in())[outputs.name_out().index("voltage_v")]])
+        self.period_voltage_v = np.zeros(model.nu)
 
     @property
     def safety_cutoff_c(self) -> float:
@@ -92,10 +97,13 @@ class Plant:
         return self.model.ambient_c + (s.plant.ambient_step_c if stepped else 0.0)
 
     def apply(self, current_a) -> None:
-        """Hold ``current_a`` (clipped to +-peak) for one control period."""
+        """Hold ``current_a`` (clipped to +-peak) for one control period; ``period_voltage_v``: per joint, the
+        largest |motor voltage| over it (its start, every sub-step, its end)."""
         self.current_a = np.clip(np.asarray(current_a, dtype=float).reshape(-1), -self._peak, self._peak)
-        xs = np.array(self._period(self.x, self.current_a, self.ambient_c))
+        xs = np.hstack([self.x[:, None], np.array(self._period(self.x, self.current_a, self.ambient_c))])
         self.peak_winding_c = max(self.peak_winding_c, float(xs[self._winding, :].max()))
+        volts = self._voltages(xs, np.repeat(self.current_a[:, None], xs.shape[1], axis=1), self.ambient_c)
+        self.period_voltage_v = np.abs(np.array(volts)).max(axis=1)
         self.x = xs[:, -1].copy()
         self.time_s += self.settings.controller.control_period_s
 

@@ -5,7 +5,8 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
   p = [q_ref, sqrt(tracking weight), hold flag, ambient_c, direction, the request's numbers];
 - costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
   (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
-- constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
+- constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus at the knot's
+  start and end, the current held),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
   ``return_band`` (back down at the end); the current box |i| <= peak;
 - with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
