@@ -7,7 +7,6 @@ import collections
 import dataclasses
 from typing import Mapping
 
-import casadi as ca
 import numpy as np
 
 from ..model.actuated import ActuatedArm
@@ -80,9 +79,8 @@ class Plant:
         self._delivered: np.ndarray | None = None
         self._stuck: np.ndarray | None = None
         self.peak_winding_c = float(np.max(self.x[self._winding]))
-        outputs = model.outputs.map(settings.plant.plant_substeps + 1)
-        self._voltages = ca.Function("period_voltages", outputs.mx_in(),
-                                     [outputs(*outputs.mx_in())[outputs.name_out().index("voltage_v")]])
+        self._outputs = model.outputs.map(settings.plant.plant_substeps + 1)
+        self._voltage_out = model.outputs.name_out().index("voltage_v")
         self.period_voltage_v = np.zeros(model.nu)
 
     @property
@@ -102,8 +100,8 @@ class Plant:
         self.current_a = np.clip(np.asarray(current_a, dtype=float).reshape(-1), -self._peak, self._peak)
         xs = np.hstack([self.x[:, None], np.array(self._period(self.x, self.current_a, self.ambient_c))])
         self.peak_winding_c = max(self.peak_winding_c, float(xs[self._winding, :].max()))
-        volts = self._voltages(xs, np.repeat(self.current_a[:, None], xs.shape[1], axis=1), self.ambient_c)
-        self.period_voltage_v = np.abs(np.array(volts)).max(axis=1)
+        out = self._outputs(xs, np.repeat(self.current_a[:, None], xs.shape[1], axis=1), self.ambient_c)
+        self.period_voltage_v = np.abs(np.array(out[self._voltage_out])).max(axis=1)
         self.x = xs[:, -1].copy()
         self.time_s += self.settings.controller.control_period_s
 
