@@ -10,6 +10,7 @@ import pytest
 
 from thermo_ddp.mpc import (ExtendedKalmanFilter, FaultySolver, MPCSettings, RecedingHorizonController, build_models,
                             mpc_solver, planning_problem, run_closed_loop, stuck_run_length)
+from thermo_ddp.mpc.plant import Plant
 from thermo_ddp.studies.sweep import robustness_sweep
 from thermo_ddp.tasks.limits import joint_range_rad
 
@@ -239,4 +240,44 @@ def test_fallback_brakes_into_the_stop_approach_envelope():
     assert excess(falling, braked[0] + 0.2) > 0.005
     hold = np.asarray(model.static_current_a([-1.5]), float).reshape(1)   # holds the arm still, mid-range
     kept, moved = controller.range_guard(model.state(q=[-1.5]), hold)
+    assert not moved and kept[0] == hold[0]
+
+
+def _period_voltage_v(model, settings, x, current):
+    """Oracle: the motor voltage over one control period under the held current, from a 10-step RK4 of the model
+    (the plant's integration), at the period's start, every sub-step and its end."""
+    fine = model.step_function(DT / 10, "rk4", runtime_payload=True).mapaccum(10)
+    xs = np.hstack([np.asarray(x, float)[:, None], np.array(fine(x, current, [model.ambient_c,
+                                                                                settings.scenario.payload_kg]))])
+    out = model.outputs.map(xs.shape[1])(xs, np.full((1, xs.shape[1]), current), model.ambient_c)
+    return np.array(out[model.outputs.name_out().index("voltage_v")]).ravel()
+
+
+def test_bus_voltage_is_kept_over_the_whole_period():
+    """Seed 575919545's over-voltage (branch mpc6, nominal hold): a re-plan drove -20 A at -2.31 rad/s (-1.25 rad,
+    lifting toward the goal); the voltage met the bus at the period's start and was 55.9 V at its end. The
+    planner's ``bus_voltage`` rows now reach the period's peak (oracle: the voltage of a 10-step RK4 over the
+    period), and the controller's voltage guard brings that current to the one whose period peaks at the bus
+    (0.2 A more exceeds it); a current that holds the arm still is left alone."""
+    settings = MPCSettings.from_options(limit_c=LIMIT_C, hold_s=HOLD_S)
+    model = build_models(settings)[0]
+    lp = planning_problem(settings, model)
+    controller = RecedingHorizonController(lp, settings)
+    bus_v = float(model.params[model.joints[0]].motor.bus_voltage_v)
+    x = model.state(q=[-1.25], v=[-2.31], temperatures_c=np.full(model.nx - 2, 60.0))
+    volts = _period_voltage_v(model, settings, x, -20.0)
+    assert abs(volts[0]) < bus_v - 4 and abs(volts).max() > bus_v + 6      # under at the start, over at the end
+    plant = Plant(model, x, settings, np.random.default_rng(0))             # what the closed loop counts
+    plant.apply([-20.0])
+    assert plant.period_voltage_v[0] == pytest.approx(abs(volts).max(), abs=1e-9)
+    row = next(c for c in lp.problem.constraints if c.name == "bus_voltage").function
+    rows = np.array(row(x, -20.0, controller.window()[0])).ravel()
+    assert abs(rows.max() - (abs(volts).max() - bus_v)) < 0.05            # the rows see the period's peak
+
+    limited, moved = controller.voltage_guard(x, np.array([-20.0]))
+    assert moved and -20.0 < limited[0] < 0
+    assert abs(abs(_period_voltage_v(model, settings, x, limited[0])).max() - bus_v) < 0.01
+    assert abs(_period_voltage_v(model, settings, x, limited[0] - 0.2)).max() > bus_v + 0.3
+    hold = np.asarray(model.static_current_a([-1.5]), float).reshape(1)
+    kept, moved = controller.voltage_guard(model.state(q=[-1.5]), hold)
     assert not moved and kept[0] == hold[0]

@@ -32,7 +32,8 @@ class ClosedLoopResult:
     True plant signals: ``winding_c``, ``casing_c``, ``drive_c`` (None without a drive node), ``q_rad``,
     ``v_rad_s``. Observer: ``estimated_winding_c``, ``winding_std_c``, ``resistance_scale``. Sensor:
     ``measured_casing_c`` (the last received sample; ``casing_received`` says which instants got one).
-    Per period k -> k+1: ``current_a``, ``voltage_v`` (at t_k), ``solve_s``, ``first_solve_s``,
+    Per period k -> k+1: ``current_a``, ``voltage_v`` (at t_{k+1}, the sensor's), ``period_voltage_v`` (the
+    largest |voltage| over the period: its start, the plant's sub-steps, its end), ``solve_s``, ``first_solve_s``,
     ``iterations``, ``step_status``, ``hold_s``. ``peak_winding_c`` includes the plant's sub-steps.
     ``planner_x0`` (K, nx) and ``planner_params`` (K, N+1, np): what every solve was given;
     ``measurements`` (K+1): what the observer was given (to re-run a filter offline).
@@ -77,6 +78,7 @@ class ClosedLoopResult:
     joint_range_rad: tuple[float, float] = (-np.inf, np.inf)
     current_peak_a: float = np.inf
     bus_voltage_v: float = np.inf
+    period_voltage_v: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return (f"ClosedLoopResult({self.status}, peak winding {self.peak_winding_c:.2f} °C, "
@@ -109,9 +111,10 @@ class ClosedLoopResult:
     @property
     def actuator_excess(self) -> dict[str, np.ndarray]:
         """Per period, how far the current sent is over the motor's peak (A) and the motor voltage over the bus
-        voltage (V), at t_k (0 within)."""
+        voltage (V), over the whole period (``period_voltage_v``; without it, at its end) (0 within)."""
+        volts = self.voltage_v if self.period_voltage_v is None else self.period_voltage_v
         return {"current_a": np.maximum(np.abs(self.current_a) - self.current_peak_a, 0.0),
-                "voltage_v": np.maximum(np.abs(self.voltage_v) - self.bus_voltage_v, 0.0)}
+                "voltage_v": np.maximum(np.abs(volts) - self.bus_voltage_v, 0.0)}
 
     @property
     def estimation_error_c(self) -> np.ndarray:
@@ -193,8 +196,8 @@ class ClosedLoopResult:
 @dataclasses.dataclass
 class _Log:
     rows: dict[str, list] = dataclasses.field(default_factory=lambda: {k: [] for k in (
-        "x", "est", "std", "scale", "casing", "received", "current", "voltage", "steps", "x0", "params",
-        "measurements", "events", "tightening")})
+        "x", "est", "std", "scale", "casing", "received", "current", "voltage", "period_voltage", "steps", "x0",
+        "params", "measurements", "events", "tightening")})
 
     def instant(self, plant: Plant, observer: ExtendedKalmanFilter, m: Measurement, casing, received: bool):
         r = self.rows
@@ -210,6 +213,7 @@ class _Log:
         r = self.rows
         r["current"].append(plant.current_a.copy())
         r["voltage"].append(plant.voltage_v())
+        r["period_voltage"].append(plant.period_voltage_v.copy())
         r["steps"].append(step)
         r["x0"].append(np.array(x0))
         r["params"].append(params)
@@ -390,7 +394,7 @@ def _result(settings: MPCSettings, plant: Plant, log_: _Log, tripped: bool) -> C
         q_rad=xs[:, model.index(first, "q_rad")], v_rad_s=xs[:, model.index(first, "v_rad_s")],
         estimated_winding_c=logged("est"), winding_std_c=logged("std"), resistance_scale=np.array(r["scale"]),
         measured_casing_c=logged("casing"), casing_received=np.array(r["received"]),
-        current_a=logged("current"), voltage_v=logged("voltage"),
+        current_a=logged("current"), voltage_v=logged("voltage"), period_voltage_v=logged("period_voltage"),
         solve_s=np.array([s.solve_s for s in steps]), first_solve_s=np.array([s.first_solve_s for s in steps]),
         iterations=np.array([s.iterations for s in steps]), step_status=tuple(s.status for s in steps),
         hold_s=np.array([s.hold_s for s in steps]), peak_winding_c=float(peak),

@@ -13,10 +13,12 @@ too late; it is discarded), also leads to that fallback, and the period says so 
 Joule heat the winding conducts away at its present temperatures, from the model's ODE) once the
 planning state's winding is at the planning limit; the range guard (:meth:`RecedingHorizonController.range_guard`)
 then brakes a fallback's current, and every current from the lowering's start on, into the ``stop_approach``
-envelope toward the joint's stops, over the derating. While the lowering lies ahead, its knots' winding limit is
-lowered by ``lowering_reserve_c`` (the hold keeps the lowering's heat). ``tightening_c`` raises every thermal node of
-the planning state (the estimate) by that many kelvin: with a nearly linear network and a casing
-time constant of tens of minutes this tightens the limit by about as much over the whole window.
+envelope toward the joint's stops, over the derating; the voltage guard
+(:meth:`RecedingHorizonController.voltage_guard`) keeps every period's voltage under the bus, over both. While the
+lowering lies ahead, its knots' winding limit is lowered by ``lowering_reserve_c`` (the hold keeps the lowering's
+heat). ``tightening_c`` raises every thermal node of the planning state (the estimate) by that many kelvin: with a
+nearly linear network and a casing time constant of tens of minutes this tightens the limit by about as much over
+the whole window.
 
 With ``settings.controller.robust_uncertainty`` the hold is also kept safe for every motor of an uncertainty
 set (:mod:`thermo_ddp.mpc.robust`).
@@ -31,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..tasks.attempts import SolverLadder
-from ..tasks.constraints import toward_stops
+from ..tasks.constraints import bus_voltage, toward_stops
 from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
@@ -357,6 +359,8 @@ class RecedingHorizonController:
         if status == "fallback" or self.k >= self.lift_knots + self.hold_knots:  # the lift may swing: not braked
             current, braked = self.range_guard(x_est, current)
             events += ["range_brake"] if braked else []
+        current, limited = self.voltage_guard(x_est, current)
+        events += ["voltage_limit"] if limited else []
         return ControlStep(current_a=self._clip(current), status=status, solver_status=result.status,
                            solve_s=sum(r.solve_s for r in results), first_solve_s=results[0].solve_s,
                            iterations=sum(r.iterations for r in results), solves=len(results), hold_s=self.hold_s,
@@ -428,26 +432,39 @@ class RecedingHorizonController:
         distance``; :func:`thermo_ddp.tasks.constraints.toward_stops`), and whether it was moved: a brake on every
         period's current (the plan's rows are soft, the fallback's current stale), which overrides the derating (a
         load that falls through the joint's stop is not an option; the winding's back-off band and the planning
-        state's tightening are the heat it spends). The rows are affine
-        in each joint's own current over one step (the model's step at 0 and 1 A, the window's first row); a joint
-        whose rows cannot all be met gets the current of its most violated row's bound."""
+        state's tightening are the heat it spends). See :meth:`_guard`."""
+        return self._guard(x, current, self._envelope)
+
+    def voltage_guard(self, x: np.ndarray, current: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``current`` moved, per joint, into the interval that keeps the motor voltage within the bus voltage over
+        the whole period (the lift's ``bus_voltage`` rows at its start and its end under the held current,
+        :func:`thermo_ddp.tasks.constraints.bus_voltage`), and whether it was moved: the drive cannot apply more,
+        so it has the last word, over the range guard's brake (a fallback's stale current, or a plan's first
+        current from an estimate the plan did not see). See :meth:`_guard`."""
+        return self._guard(x, current, self._bus_envelope, about_current=True)
+
+    def _guard(self, x: np.ndarray, current: np.ndarray, rows, about_current: bool = False) -> tuple[np.ndarray, bool]:
+        """``current`` clipped, per joint, to the interval where its ``rows(x, u, params)`` (per joint, <= 0 inside)
+        hold. The rows are affine in each joint's own current over one step (evaluated at 0 and 1 A, or, with
+        ``about_current``, at ``current`` and 1 A more; the window's first row); a joint whose rows cannot all be
+        met gets the current of its most violated row's bound."""
         x = np.asarray(x, float)
         params = self.window()[0]
         n = self.lp.model.nu
-        base = self._envelope(x, np.zeros(n), params)
         out = np.array(current, dtype=float).reshape(-1)
+        at = self._clip(out) if about_current else np.zeros(n)
+        base = rows(x, at, params)
         for j in range(n):
             one = np.zeros(n)
             one[j] = 1.0
-            slope = self._envelope(x, one, params)[j] - base[j]
-            bounds = -base[j] / np.where(slope != 0, slope, np.nan)
+            slope = rows(x, at + one, params)[j] - base[j]
+            bounds = at[j] - base[j] / np.where(slope != 0, slope, np.nan)
             upper = bounds[slope > 0].min(initial=np.inf)
             lower = bounds[slope < 0].max(initial=-np.inf)
             if lower <= upper:
                 out[j] = np.clip(out[j], lower, upper)
             else:   # no current meets every row: the bound of the row most violated at the present current
-                rows = base[j] + slope * out[j]
-                worst = int(np.argmax(rows))
+                worst = int(np.argmax(base[j] + slope * (out[j] - at[j])))
                 out[j] = bounds[worst] if np.isfinite(bounds[worst]) else out[j]
         out = self._clip(out)
         return out, bool(np.any(np.abs(out - np.asarray(current, float).reshape(-1)) > 1e-9))
@@ -457,12 +474,24 @@ class RecedingHorizonController:
         x_next = np.array(self.lp.problem.functions.step(x, u, params)).ravel()
         return np.array(self._stop_rows(x_next)).reshape(self.lp.model.nu, -1)
 
+    def _bus_envelope(self, x: np.ndarray, u: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """Per joint, the ``bus_voltage`` rows (<= 0 inside) over the period from ``x`` under ``u``."""
+        return np.array(self._bus_rows(x, u, params)).reshape(self.lp.model.nu, -1)
+
     @functools.cached_property
     def _stop_rows(self) -> ca.Function:
         model, s = self.lp.model, self.lp.settings
         x = ca.SX.sym("x", model.nx)
         rows = [toward_stops(model, joint, x, s.stop_speed_rad_s, s.stop_slope_per_s) for joint in model.joints]
         return ca.Function("stop_rows", [x], [ca.vertcat(*rows)])
+
+    @functools.cached_property
+    def _bus_rows(self) -> ca.Function:
+        model, pr = self.lp.model, self.lp.problem
+        x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", pr.n_params)
+        x_next = pr.functions.step(x, u, p)
+        rows = [bus_voltage(model, joint, x, u[j], x_next) for j, joint in enumerate(model.joints)]
+        return ca.Function("bus_rows", [x, u, p], [ca.vertcat(*rows)])
 
     def no_heating_current_a(self, x: np.ndarray) -> np.ndarray:
         """Per joint, the ``|current|`` at which the winding's temperature stops rising at state ``x`` (model ODE:

@@ -79,6 +79,9 @@ class Plant:
         self._delivered: np.ndarray | None = None
         self._stuck: np.ndarray | None = None
         self.peak_winding_c = float(np.max(self.x[self._winding]))
+        self._outputs = model.outputs.map(settings.plant.plant_substeps + 1)
+        self._voltage_out = model.outputs.name_out().index("voltage_v")
+        self.period_voltage_v = np.zeros(model.nu)
 
     @property
     def safety_cutoff_c(self) -> float:
@@ -92,10 +95,13 @@ class Plant:
         return self.model.ambient_c + (s.plant.ambient_step_c if stepped else 0.0)
 
     def apply(self, current_a) -> None:
-        """Hold ``current_a`` (clipped to +-peak) for one control period."""
+        """Hold ``current_a`` (clipped to +-peak) for one control period; ``period_voltage_v``: per joint, the
+        largest |motor voltage| over it (its start, every sub-step, its end)."""
         self.current_a = np.clip(np.asarray(current_a, dtype=float).reshape(-1), -self._peak, self._peak)
-        xs = np.array(self._period(self.x, self.current_a, self.ambient_c))
+        xs = np.hstack([self.x[:, None], np.array(self._period(self.x, self.current_a, self.ambient_c))])
         self.peak_winding_c = max(self.peak_winding_c, float(xs[self._winding, :].max()))
+        out = self._outputs(xs, np.repeat(self.current_a[:, None], xs.shape[1], axis=1), self.ambient_c)
+        self.period_voltage_v = np.abs(np.array(out[self._voltage_out])).max(axis=1)
         self.x = xs[:, -1].copy()
         self.time_s += self.settings.controller.control_period_s
 

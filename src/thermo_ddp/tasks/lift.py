@@ -5,7 +5,8 @@ The lift is a problem built on the general OCP layer (the solvers know nothing o
   p = [q_ref, sqrt(tracking weight), hold flag, ambient_c, direction, the request's numbers];
 - costs by name: ``tracking`` (q to a smooth reference: lift, hold, lower), ``joule_energy``
   (R(T_w) i^2 dt, the heat put into the winding), ``velocity`` (small regulariser);
-- constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus),
+- constraints by name: ``winding_limit`` (T_w <= limit), ``bus_voltage`` (|R(T) i + K_b N v| <= V_bus at the knot's
+  start and end, the current held),
   ``joint_range``, ``joint_velocity``, ``hold_band`` (|q - goal| <= tolerance while holding),
   ``return_band`` (back down at the end); the current box |i| <= peak;
 - with ``careful_motion`` (on by default), the motion a careful operator would ask for: the cost
@@ -254,7 +255,8 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     terminal_costs = (
         Cost("terminal_tracking", 1.0, terminal("terminal_tracking", par["sqrt_tracking_weight"] * (q - start))),
         Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
-    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"])
+    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"],
+                                     x_next=step(x, u, env))
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
         Constraint("hold_band", stage("hold_band", ca.vertcat(par["hold_flag"] * (q - goal) - tol,
                                                              par["hold_flag"] * (goal - q) - tol), "g")),
