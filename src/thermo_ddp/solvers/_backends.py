@@ -93,10 +93,10 @@ COMPILED = ("local", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
 # A model whose local model is at most this big also gets the knot functions that only save run time, not
 # needed by the driver: the local model with the knot's evaluation (the first pass; else ``eval`` then ``local``)
 # and the first-order step from one reverse sweep of the knot's Lagrangian (else ``local`` then ``grad_core``;
-# rk4_4 lift knot: 1,918 against 2,380 instructions). The lift's local model has ~2,000 instructions, the 4-joint
-# arm's 22,809; the 7-joint arm's 78,348, where they cost more to build than they save: gcc took 11.8 s on the
-# one-sweep step's 0.9 MB of C alone (the arm's build 14.8 -> 21.9 s when it came) for a pass that runs a few
-# times per solve.
+# the lift's rk4_4 knot: 2,923 instructions, its local model alone 8,154). Local models: the 4-joint arm's 22,809;
+# the 7-joint arm's ~78,700, where they cost more to build than they save: gcc took 11.8 s on the one-sweep
+# step's 0.9 MB of C alone (the arm's build 14.8 -> 21.9 s when it came; without them 12.7 s) for a pass that
+# runs a few times per solve.
 SMALL_KNOT_INSTRUCTIONS = 30_000
 # Optional knot functions: the driver calls them through pointers, NULL when not generated.
 OPTIONAL = ("ddp_fused_step", "ddp_fused_eval_step", "ddp_local_eval_knot", "ddp_grad_first_knot")

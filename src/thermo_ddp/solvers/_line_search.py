@@ -13,6 +13,7 @@ from . import _augmented_lagrangian as al
 # 0.02-0.3 on the lift's longest-hold searches; benchmarks/README.md, passes7).
 CROSSED_TRIALS, CROSSED_REACH = 1, 0.1
 
+
 @dataclasses.dataclass
 class Iterate:
     """The accepted trajectory and its evaluations (the DDP solver's workspace, never returned)."""
