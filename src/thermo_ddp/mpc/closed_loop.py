@@ -33,7 +33,7 @@ class ClosedLoopResult:
     ``v_rad_s``. Observer: ``estimated_winding_c``, ``winding_std_c``, ``resistance_scale``. Sensor:
     ``measured_casing_c`` (the last received sample; ``casing_received`` says which instants got one).
     Per period k -> k+1: ``current_a``, ``voltage_v`` (at t_{k+1}, the sensor's), ``period_voltage_v`` (the
-    largest |voltage| over the period: its start, the plant's sub-steps, its end), ``solve_s``, ``first_solve_s``,
+    largest absolute voltage over the period: its start, the plant's sub-steps, its end), ``solve_s``, ``first_solve_s``,
     ``iterations``, ``step_status``, ``hold_s``. ``peak_winding_c`` includes the plant's sub-steps.
     ``planner_x0`` (K, nx) and ``planner_params`` (K, N+1, np): what every solve was given;
     ``measurements`` (K+1): what the observer was given (to re-run a filter offline).

@@ -96,7 +96,7 @@ class Plant:
 
     def apply(self, current_a) -> None:
         """Hold ``current_a`` (clipped to +-peak) for one control period; ``period_voltage_v``: per joint, the
-        largest |motor voltage| over it (its start, every sub-step, its end)."""
+        largest absolute motor voltage over it (its start, every sub-step, its end)."""
         self.current_a = np.clip(np.asarray(current_a, dtype=float).reshape(-1), -self._peak, self._peak)
         xs = np.hstack([self.x[:, None], np.array(self._period(self.x, self.current_a, self.ambient_c))])
         self.peak_winding_c = max(self.peak_winding_c, float(xs[self._winding, :].max()))
