@@ -6,7 +6,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ._backends import knot_functions, penalties
+from ._backends import MODEL_PARTS, knot_functions, penalties
 from ._riccati import NumpyOps, backward_step, gradient_step
 
 
@@ -22,7 +22,7 @@ class NumpyBackend:
         self._eval = knots["eval"].map(problem.horizon)
         self._fwd, self._end = knots["fwd"], knots["end"]
         model, (x, u, p, lam, _, rho) = knots["model"], knots["syms"]
-        names = ["A", "B", "lx", "lu", "lxx", "luu", "lux"]
+        names = list(MODEL_PARTS)
         outs = [ca.densify(model[n]) for n in names]
         self._names = names
         self._second = None
