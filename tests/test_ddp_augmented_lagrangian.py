@@ -102,7 +102,7 @@ def test_a_row_with_a_multiplier_just_short_of_its_kink_gets_the_penalty_curvatu
 
     x, u, p = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p")
     F = types.SimpleNamespace(stage_residual=lambda x, u, p: u, stage_constraint=lambda x, u, p: ca.vertcat(u - 1, u - 2),
-                              step=lambda x, u, p: x + u, step_jacobians=None)
+                              step=lambda x, u, p: x + u, step_jacobians=None, stage_terms=None)
     lam, rho = ca.SX.sym("lam", 2), ca.SX.sym("rho", 2)
     luu = {m: ca.Function("luu", [u, lam, rho], [knot_model(F, x, u, p, lam, rho, False, margin=m)["luu"]])
            for m in (0.0, 1e-4)}
@@ -127,7 +127,7 @@ def test_a_flagged_row_is_modelled_by_its_quadratic_piece():
 
     x, u, p = ca.SX.sym("x"), ca.SX.sym("u"), ca.SX.sym("p")
     F = types.SimpleNamespace(stage_residual=lambda x, u, p: u, stage_constraint=lambda x, u, p: u - 1,
-                              step=lambda x, u, p: x + u, step_jacobians=None)
+                              step=lambda x, u, p: x + u, step_jacobians=None, stage_terms=None)
     lam, rho = ca.SX.sym("lam"), ca.SX.sym("rho")
     m = knot_model(F, x, u, p, lam, rho, False)
     f = ca.Function("f", [u, lam, rho], [m["lu"], m["luu"]])

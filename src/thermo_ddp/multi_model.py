@@ -11,7 +11,8 @@ and the solver's state grows by the private part only (a DDP's work grows with n
 states' dynamics must read neither the private states nor ``theta`` (checked): e.g. the mechanical
 state (q, v) of thermal scenarios, which all follow the same control.
 
-Terms, given as for one scenario (inputs among x, u, p, theta):
+Terms, given as for one scenario (inputs among x, u, p, theta; a stage term also ``x_next``, the scenario's state
+at the knot's end):
 - costs: on the nominal scenario 0 (``cost_on="nominal"``, the default), or on the mean over the
   scenarios (``"mean"``: each scenario's residual weighted by 1/K); a term that reads only the shared
   states and p is the same for every scenario and appears once;
@@ -31,10 +32,11 @@ import casadi as ca
 import numpy as np
 
 from .errors import InputError
-from .ocp import Constraint, Cost, KnotParameters, OptimalControlProblem, _try_sx
+from .ocp import END_STATE, Constraint, Cost, KnotParameters, OptimalControlProblem, _try_sx, term_function
 
 COST_ON = ("nominal", "mean")
 SCENARIO_INPUTS = ("x", "u", "p", "theta")
+STAGE_TERM_INPUTS = (*SCENARIO_INPUTS, END_STATE)
 CROSS_INPUTS = ("X", "u", "p", "Theta")
 _SRC = "MultiModelProblem"
 
@@ -98,8 +100,8 @@ class MultiModelProblem:
             raise InputError(_SRC, "shared", self.shared, f"expected 0 to {self.nx_scenario - 1} shared states")
         if self.parameters is not None and self.parameters.size != self.n_params:
             raise InputError(_SRC, "parameters", self.parameters.blocks, f"the dynamics take {self.n_params}")
-        for field, allowed in (("costs", SCENARIO_INPUTS), ("terminal_costs", SCENARIO_INPUTS),
-                               ("constraints", SCENARIO_INPUTS), ("terminal_constraints", SCENARIO_INPUTS),
+        for field, allowed in (("costs", STAGE_TERM_INPUTS), ("terminal_costs", SCENARIO_INPUTS),
+                               ("constraints", STAGE_TERM_INPUTS), ("terminal_constraints", SCENARIO_INPUTS),
                                ("cross_costs", CROSS_INPUTS), ("terminal_cross_costs", CROSS_INPUTS)):
             object.__setattr__(self, field, tuple(getattr(self, field)))
             for term in getattr(self, field):
@@ -209,9 +211,10 @@ class MultiModelProblem:
         return ca.vertcat(nexts[0][:self.shared, 0], *[xn[self.shared:, 0] for xn in nexts])
 
     def _depends_on_scenario(self, fun: ca.Function) -> bool:
-        x, th = ca.SX.sym("x", self.nx_scenario), ca.SX.sym("theta", self.n_theta)
-        args = {"x": x, "u": ca.SX.sym("u", self.nu), "p": ca.SX.sym("p", self.n_params), "theta": th}
-        return bool(ca.depends_on(_call(_try_sx(fun), args), ca.vertcat(x[self.shared:], th)))
+        x, xn = ca.SX.sym("x", self.nx_scenario), ca.SX.sym(END_STATE, self.nx_scenario)
+        th = ca.SX.sym("theta", self.n_theta)
+        args = {"x": x, "u": ca.SX.sym("u", self.nu), "p": ca.SX.sym("p", self.n_params), "theta": th, END_STATE: xn}
+        return bool(ca.depends_on(_call(_try_sx(fun), args), ca.vertcat(x[self.shared:], xn[self.shared:], th)))
 
     def _costs(self, sym, costs, terminal: bool) -> tuple[Cost, ...]:
         out = []
@@ -248,10 +251,12 @@ class _Symbols:
         self.x = ca.SX.sym("x", mm.nx)
         self.u = ca.SX.sym("u", mm.nu)
         self.p = ca.SX.sym("p", mm.n_params + mm.scenarios * mm.n_theta)
+        self.x_next = ca.SX.sym(END_STATE, mm.nx)
 
-    def state(self, k: int):
-        mm, s = self.mm, self.mm.shared
-        return ca.vertcat(self.x[:s, 0], self.x[s + k * mm.n_private: s + (k + 1) * mm.n_private])
+    def state(self, k: int, stacked=None):
+        """Scenario ``k``'s whole state in the stacked state ``stacked`` (default: the knot's x)."""
+        mm, s, x = self.mm, self.mm.shared, self.x if stacked is None else stacked
+        return ca.vertcat(x[:s, 0], x[s + k * mm.n_private: s + (k + 1) * mm.n_private])
 
     def theta(self, k: int):
         start = self.mm.n_params + k * self.mm.n_theta
@@ -259,7 +264,7 @@ class _Symbols:
 
     def scenario(self, k: int, stage: bool) -> dict:
         args = {"x": self.state(k), "p": self.p[:self.mm.n_params], "theta": self.theta(k)}
-        return args | {"u": self.u} if stage else args
+        return args | {"u": self.u, END_STATE: self.state(k, self.x_next)} if stage else args
 
     def cross(self, stage: bool) -> dict:
         K = range(self.mm.scenarios)
@@ -268,5 +273,7 @@ class _Symbols:
         return args | {"u": self.u} if stage else args
 
     def function(self, name: str, expr, out: str, terminal: bool = False) -> ca.Function:
-        inputs, names = ([self.x, self.p], ["x", "p"]) if terminal else ([self.x, self.u, self.p], ["x", "u", "p"])
-        return ca.Function(f"{name}_stacked".replace("[", "_").replace("]", ""), inputs, [expr], names, [out])
+        name = f"{name}_stacked".replace("[", "_").replace("]", "")
+        if terminal:
+            return term_function(name, expr, out, self.x, self.p)
+        return term_function(name, expr, out, self.x, self.p, self.u, self.x_next)

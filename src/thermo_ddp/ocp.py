@@ -11,6 +11,11 @@ The problem, with knots k = 0..N-1 and terminal knot N::
     s.t.  x_0 = x0,   x_{k+1} = f(x_k, u_k, p_k),
           g(x_k, u_k, p_k) <= 0,   g_N(x_N, p_N) <= 0,   u_lb <= u_k <= u_ub.
 
+A stage term may also read the knot's end state: an input named ``x_next`` is f(x_k, u_k, p_k) (e.g. a
+voltage at the end of a knot under its held current). Every solver evaluates it there; DDP takes its
+derivatives through the dynamics' Jacobians A, B and folds its curvature into the dynamics' second-order
+term, instead of differentiating the composition (:func:`thermo_ddp.solvers._riccati.knot_model`).
+
 Every solver (DDP, IPOPT, fatrop) works on the functions built here, so all solve the
 identical problem.
 """
@@ -32,6 +37,7 @@ log = logging.getLogger(__name__)
 
 STAGE_INPUTS = ("x", "u", "p")
 TERMINAL_INPUTS = ("x", "p")
+END_STATE = "x_next"  # a stage term's optional input: the knot's end state f(x, u, p)
 _SRC = "OptimalControlProblem"
 
 
@@ -121,8 +127,8 @@ class KnotParameters:
 class Cost:
     """Least-squares cost term 0.5 * sum(weight * r**2).
 
-    ``residual`` is a casadi.Function with named inputs (x, u, p) for a stage cost or (x, p)
-    for a terminal cost (p may be omitted) and one output ``r`` (a column vector).
+    ``residual`` is a casadi.Function with named inputs (x, u, p, optionally x_next: the knot's end state) for a
+    stage cost or (x, p) for a terminal cost (p may be omitted) and one output ``r`` (a column vector).
     ``weight`` is a scalar or one non-negative value per residual entry.
     """
 
@@ -142,7 +148,8 @@ class Cost:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Constraint:
-    """Inequality g <= 0 (elementwise); ``function`` maps (x, u, p) or (x, p) to ``g``."""
+    """Inequality g <= 0 (elementwise); ``function`` maps (x, u, p, optionally x_next: the knot's end state) or
+    (x, p) to ``g``."""
 
     name: str
     function: ca.Function
@@ -166,6 +173,15 @@ class Constraint:
         name = name or f"{self.name}_penalty"
         inputs, g = _symbolic_call(self.function, "g", self.name)
         return Cost(name, weight, ca.Function(name, inputs, [ca.fmax(0, g)], self.function.name_in(), ["r"]))
+
+
+def term_function(name: str, expr, out: str, x, p, u=None, x_next=None) -> ca.Function:
+    """A term's casadi Function of (x, u, p), and of the knot's end state when ``expr`` reads ``x_next`` (a stage
+    term), or of (x, p) when ``u`` is None (a terminal term); ``out``: "r" for a residual, "g" for a constraint."""
+    named = [("x", x)] + ([] if u is None else [("u", u)]) + [("p", p)]
+    if x_next is not None and ca.depends_on(expr, x_next):
+        named.append((END_STATE, x_next))
+    return ca.Function(name, [s for _, s in named], [expr], [n for n, _ in named], [out])
 
 
 def _symbolic_call(fun: ca.Function, out_name: str, where: str):
@@ -266,7 +282,7 @@ class OptimalControlProblem:
             raise InputError(_SRC, "dynamics x_next", self.dynamics.size_out(out), f"expected shape ({nx}, 1)")
         if nx < 1 or nu < 1:
             raise InputError(_SRC, "dynamics", (nx, nu), "need at least one state and one control")
-        sizes = {"x": nx, "u": nu}
+        sizes = {"x": nx, "u": nu, END_STATE: nx}
         n_p = dyn.get("p")
         for item, fun, allowed in self._functions():
             got = _input_sizes(fun, item)
@@ -304,11 +320,11 @@ class OptimalControlProblem:
 
     def _functions(self):
         for c in self.costs:
-            yield f"Cost '{c.name}'", c.residual, STAGE_INPUTS
+            yield f"Cost '{c.name}'", c.residual, (*STAGE_INPUTS, END_STATE)
         for c in self.terminal_costs:
             yield f"Cost '{c.name}' (terminal)", c.residual, TERMINAL_INPUTS
         for c in self.constraints:
-            yield f"Constraint '{c.name}'", c.function, STAGE_INPUTS
+            yield f"Constraint '{c.name}'", c.function, (*STAGE_INPUTS, END_STATE)
         for c in self.terminal_constraints:
             yield f"Constraint '{c.name}' (terminal)", c.function, TERMINAL_INPUTS
 
@@ -437,7 +453,8 @@ class ProblemFunctions:
 
     step(x,u,p)->x_next; stage_residual(x,u,p)->r (sqrt(weight)*residual, stacked);
     stage_constraint(x,u,p)->g; terminal_residual(x,p)->r; terminal_constraint(x,p)->g.
-    Costs are 0.5*|r|^2 with these weighted residuals.
+    Costs are 0.5*|r|^2 with these weighted residuals. When a stage term reads the knot's end state,
+    ``stage_terms(x,u,p,x_next)->(r,g)`` gives both with x_next free (the two above are it at x_next = step).
     """
 
     step: ca.Function
@@ -447,6 +464,7 @@ class ProblemFunctions:
     terminal_constraint: ca.Function
     symbolic: type
     step_jacobians: ca.Function | None = None
+    stage_terms: ca.Function | None = None
 
     @staticmethod
     def build(problem: OptimalControlProblem) -> "ProblemFunctions":
@@ -459,7 +477,8 @@ class ProblemFunctions:
     @staticmethod
     def _build(problem, sym) -> "ProblemFunctions":
         x, u, p = sym.sym("x", problem.nx), sym.sym("u", problem.nu), sym.sym("p", problem.n_params)
-        args = {"x": x, "u": u, "p": p}
+        xn = sym.sym(END_STATE, problem.nx)
+        args = {"x": x, "u": u, "p": p, END_STATE: xn}
         targs = {"x": x, "p": p}
         fun = _try_sx if sym is ca.SX else (lambda f: f)
         x_next = _call_named(fun(problem.dynamics), "x_next", args, "dynamics")
@@ -474,6 +493,10 @@ class ProblemFunctions:
 
         r = stacked(problem.costs, args, "r", True)
         g = stacked(problem.constraints, args, "g", False)
+        terms = None
+        if ca.depends_on(ca.vertcat(r, g), xn):
+            terms = ca.Function("stage_terms", [x, u, p, xn], [r, g], [*STAGE_INPUTS, END_STATE], ["r", "g"])
+            r, g = terms(x, u, p, x_next)
         rN = stacked(problem.terminal_costs, targs, "r", True)
         gN = stacked(problem.terminal_constraints, targs, "g", False)
         jac = None
@@ -481,7 +504,7 @@ class ProblemFunctions:
             AB = [_call_named(fun(problem.dynamics_jacobians), n, args, "dynamics_jacobians") for n in ("A", "B")]
             jac = ca.Function("step_jacobians", [x, u, p], AB, list(STAGE_INPUTS), ["A", "B"])
         return ProblemFunctions(
-            step_jacobians=jac,
+            step_jacobians=jac, stage_terms=terms,
             step=ca.Function("step", [x, u, p], [x_next], list(STAGE_INPUTS), ["x_next"]),
             stage_residual=ca.Function("stage_residual", [x, u, p], [r], list(STAGE_INPUTS), ["r"]),
             stage_constraint=ca.Function("stage_constraint", [x, u, p], [g], list(STAGE_INPUTS), ["g"]),

@@ -38,7 +38,7 @@ from ..tasks.hold_search import longest_feasible_hold
 from ..tasks.lift import LiftProblem, LiftSettings, build_lift_problem, initial_guess, make_solver, time_to_limit_s
 from .._config import require
 from ..model.actuated import ActuatedArm
-from ..ocp import Constraint, OptimalControlProblem
+from ..ocp import Constraint, OptimalControlProblem, term_function
 from ..solvers import DDPSettings, SolverResult, WarmStart
 from ..solvers.kkt import constraint_rows
 from ..tasks.limits import default_limit_c
@@ -142,7 +142,7 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
     2, 7.1 s).
     """
     x, u, p = (ca.SX.sym(n, problem.dynamics.size1_in(i)) for i, n in enumerate(problem.dynamics.name_in()))
-    x_next = problem.dynamics(x, u, p)
+    x_next = ca.SX.sym("x_next", problem.nx)
     constraints, costs = [], list(problem.costs)
     weights = dict(zip(SOFT_ROWS, (stop_weight, motion_weight)))
     for c in problem.constraints:
@@ -153,7 +153,7 @@ def planner_ocp(problem: OptimalControlProblem, backoff_c: float, backoff_weight
             costs.append(c.shifted(-margins[c.name]).penalty(MARGIN_WEIGHTS[c.name], f"{c.name}_margin"))
         if c.name in ON_NEXT_STATE:
             name = f"{c.name}_next"
-            c = Constraint(name, ca.Function(name, [x, u, p], [c.function(x_next, u, p)], ["x", "u", "p"], ["g"]))
+            c = Constraint(name, term_function(name, c.function(x_next, u, p), "g", x, p, u, x_next))
         if c.name == "winding_limit" and backoff_weight > 0:
             costs.append(c.penalty(backoff_weight, "winding_backoff"))
             c = c.shifted(backoff_c)

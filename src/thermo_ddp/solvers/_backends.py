@@ -100,7 +100,7 @@ COMPILED = ("local", "back_core", "grad_core", "terminal", "fwd", "eval", "end")
 SMALL_KNOT_INSTRUCTIONS = 30_000
 # Optional knot functions: the driver calls them through pointers, NULL when not generated.
 OPTIONAL = ("ddp_fused_step", "ddp_fused_eval_step", "ddp_local_eval_knot", "ddp_grad_first_knot")
-MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux")  # packed in this order (column-major blocks)
+MODEL_PARTS = ("A", "B", "lx", "lu", "lxx", "luu", "lux", "v_shift")  # packed in this order (column-major blocks)
 # Nodes of the full-DDP second-order term per C file: the 7-joint arm's (nz = 42) splits in two.
 HESSIAN_CHUNK_NODES = 1_000_000
 # A full-DDP model whose second-order term is at most this big also gets the whole Riccati step as one
@@ -150,13 +150,13 @@ def _nonzeros(m):
 def _backward_knot(problem, settings, layout, knots, model_in, compiled):
     """One Riccati step from the packed local model (compiled core; composed with the local model for the
     VM unless ``compiled``) and the terminal value function. Full DDP: the core takes the dynamics'
-    second-order term H = d2(v'f)/dz2 (z = [x; u], v = a + b + Vxx c) as an input ``hess`` (empty in
+    second-order term H = d2(v'f)/dz2 (z = [x; u], v = a + b + Vxx c + v_shift) as an input ``hess`` (empty in
     Gauss-Newton), computed by the ``hess`` chunk functions (see _hessian_chunks)."""
     F, nx, nz = problem.functions, problem.nx, problem.nx + problem.nu
     x, u, p, lam, lamN, rho = knots["syms"]
     reg, c, S = F.symbolic.sym("reg"), F.symbolic.sym("c", nx), F.symbolic.sym("S", layout.n_value)
     packed, model = model_in[0], dict(model_in[1])
-    chunks = _hessian_chunks(problem, layout, x, u, p) if settings.full_second_order else []
+    chunks = _hessian_chunks(problem, layout, x, u, p, model_in) if settings.full_second_order else []
     hess = F.symbolic.sym("hess", sum(f.nnz_out(0) for f, _ in chunks))
     if chunks:
         columns = np.concatenate([cols for _, cols in chunks])
@@ -168,10 +168,12 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
     back = _function("ddp_back_knot", [S, packed, u, c, reg, hess], [S_prev, policy],
                      ["S", "model", "u", "c", "reg", "hess"], ["S_prev", "policy"])
     knots["hess"] = [f for f, _ in chunks]
-    composed = None if compiled else ca.Function(
-        "ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
-        back(S, knots["local"](x, u, p, lam, rho), u, c, reg, ca.vertcat(*[f(S, c, x, u, p) for f, _ in chunks])),
-        ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
+    composed = None
+    if not compiled:
+        local = knots["local"](x, u, p, lam, rho)
+        composed = ca.Function("ddp_back_composed", [S, x, u, p, lam, c, rho, reg],
+                               back(S, local, u, c, reg, ca.vertcat(*[f(S, c, x, u, p, local) for f, _ in chunks])),
+                               ["S", "x", "u", "p", "lam", "c", "rho", "reg"], ["S_prev", "policy"], _CSE)
     rhoN = F.symbolic.sym("rhoN", problem.n_terminal_constraints)
     term = knot_model(F, x, None, p, lamN, rhoN, settings.full_second_order, terminal=True,
                       margin=settings.active_margin)
@@ -180,15 +182,16 @@ def _backward_knot(problem, settings, layout, knots, model_in, compiled):
     return back, composed, terminal
 
 
-def _hessian_chunks(problem, layout, x, u, p):
-    """The full-DDP term d2(v'f)/dz2 with v = a + b + Vxx c from (S, c), as functions of column groups
-    (round robin, so the costly angle columns spread evenly): for a large model each is its own C file,
-    compiled in parallel. Returns [(function, its columns)]. No CSE: it saves 1 % of their instructions
-    for the 7-joint arm (1.10e6 -> 1.12e6 without) and costs 11 s."""
+def _hessian_chunks(problem, layout, x, u, p, model_in):
+    """The full-DDP term d2(v'f)/dz2 with v = a + b + Vxx c + v_shift from (S, c) and the packed local model, as
+    functions of column groups (round robin, so the costly angle columns spread evenly): for a large model each is
+    its own C file, compiled in parallel. Returns [(function, its columns)]. No CSE: it saves 1 % of their
+    instructions for the 7-joint arm (1.10e6 -> 1.12e6 without) and costs 11 s."""
     F, nx = problem.functions, problem.nx
     S, c = F.symbolic.sym("S", layout.n_value), F.symbolic.sym("c", nx)
+    packed, model = model_in
     a, b, Vxx = layout.unpack_value(S)
-    v = a + (b + Vxx @ c)  # as backward_step
+    v = a + (b + Vxx @ c) + model["v_shift"]  # as backward_step
     z = ca.vertcat(x, u)
     grad = ca.gradient(ca.dot(v, F.step(x, u, p)), z)
     n_chunks = max(1, min(z.numel(), round(z.numel() * ca.n_nodes(grad) / HESSIAN_CHUNK_NODES)))
@@ -196,8 +199,8 @@ def _hessian_chunks(problem, layout, x, u, p):
     for k in range(n_chunks):
         cols = np.arange(k, z.numel(), n_chunks)
         H = ca.jacobian(grad, z[cols.tolist()])
-        chunks.append((_function(f"ddp_hess_{k}", [S, c, x, u, p], [ca.vec(H)], ["S", "c", "x", "u", "p"], ["hess"],
-                                 cse=False), cols))
+        chunks.append((_function(f"ddp_hess_{k}", [S, c, x, u, p, packed], [ca.vec(H)],
+                                 ["S", "c", "x", "u", "p", "model"], ["hess"], cse=False), cols))
     return chunks
 
 

@@ -9,6 +9,8 @@ import numpy as np
 from ._backends import MODEL_PARTS, knot_functions, penalties
 from ._riccati import NumpyOps, backward_step, gradient_step
 
+VECTOR_PARTS = ("lx", "lu", "v_shift")  # the local model's vectors (the other parts are matrices)
+
 
 class NumpyBackend:
     """Fallback: derivatives in one batched CasADi call (map), Riccati and rollout as numpy loops."""
@@ -39,7 +41,7 @@ class NumpyBackend:
         N = self.problem.horizon
         ng, rho = self.problem.n_constraints, penalties(self._n_rho, rho)
         mats = [np.asarray(m) for m in self._derivs(X[:, :N], U, P[:, :N], Lam, rho[:ng])]
-        data = {n: m.T if n in ("lx", "lu") else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
+        data = {n: m.T if n in VECTOR_PARTS else m.T.reshape(N, s[1], s[0]).transpose(0, 2, 1)
                 for m, s, n in zip(mats, self._shapes, self._names)}
         return data, np.asarray(self._terminal(X[:, N], P[:, N], LamN, rho[ng:])).ravel()
 

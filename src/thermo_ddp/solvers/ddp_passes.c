@@ -32,7 +32,7 @@ const casadi_int *ddp_local_knot_sparsity_out(casadi_int i);
 /* ddp_local_knot(x, u, p, lam, rho) -> the knot's packed local model (derivatives of the dynamics and of
  * the augmented-Lagrangian cost), input of ddp_back_knot(S, model, u, c, reg, hess) and of
  * ddp_grad_knot(a, model, u, policy) -> (a_prev, stat), the first-order step with the gains of policy;
- * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p), each
+ * Full DDP: the dynamics' second-order term d2(v'f)/dz2 in column chunks, inputs (S, c, x, u, p, model), each
  * writing ddp_hess_size[k] values after the previous ones (the generated table; ddp_n_hess = 0 for
  * Gauss-Newton): the input hess of ddp_back_knot. */
 extern const int ddp_n_hess;
@@ -173,7 +173,7 @@ static int back_knot(Work *W, int t, const double *X, const double *U, const dou
     double *hess = W->hess;
     int rc = 0;
     for (int k = 0; k < ddp_n_hess && !rc; ++k) {
-        W->arg[0] = S, W->arg[1] = c, W->arg[2] = x, W->arg[3] = u, W->arg[4] = p;
+        W->arg[0] = S, W->arg[1] = c, W->arg[2] = x, W->arg[3] = u, W->arg[4] = p, W->arg[5] = W->model;
         W->res[0] = hess;
         rc = ddp_hess[k](W->arg, W->res, W->iw, W->w, 0);
         hess += ddp_hess_size[k];

@@ -38,7 +38,7 @@ from ..model import motor
 from ..model.actuated import ActuatedArm, check_integrator, load_model
 from ..model.arm import ELBOW, PAYLOAD_KG
 from ..model.parameters import Bound, load_parameters, packaged_parameter_file
-from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
+from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem, term_function
 from ..solvers import DDPSettings, DDPSolver, FatropSolver, IpoptSolver, SolverResult, WarmStart
 from .attempts import Outcome, SolverLadder
 from .constraints import joint_limit_constraints, stop_approach
@@ -239,12 +239,13 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     dyn_jac = ca.Function("lift_dynamics_jacobians", [x, u, p], list(jac(x, u, env)), ["x", "u", "p"],
                           ["x_next", "A", "B"])
     tol, goal, start = par["hold_tolerance_rad"], par["goal_rad"], par["start_rad"]
+    xn = ca.SX.sym("x_next", model.nx)  # the knot's end state (a term that reads it: ocp.term_function)
 
     def stage(name, expr, out="r"):
-        return ca.Function(name, [x, u, p], [expr], ["x", "u", "p"], [out])
+        return term_function(name, expr, out, x, p, u, xn)
 
     def terminal(name, expr, out="r"):
-        return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
+        return term_function(name, expr, out, x, p)
 
     joule = motor.resistance_ohm(m, winding) * settings.dt_s
     costs = (
@@ -255,8 +256,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
     terminal_costs = (
         Cost("terminal_tracking", 1.0, terminal("terminal_tracking", par["sqrt_tracking_weight"] * (q - start))),
         Cost("terminal_velocity", 1.0, terminal("terminal_velocity", v)))
-    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"],
-                                     x_next=step(x, u, env))
+    limits = joint_limit_constraints(model, joint, x, u[0], par["limit_c"], par["velocity_limit_rad_s"], x_next=xn)
     constraints = tuple(Constraint(kind, stage(kind, g, "g")) for kind, g in limits.items()) + (
         Constraint("hold_band", stage("hold_band", ca.vertcat(par["hold_flag"] * (q - goal) - tol,
                                                              par["hold_flag"] * (goal - q) - tol), "g")),
@@ -279,7 +279,7 @@ def _functions(model: ActuatedArm, settings: LiftSettings):
                                                                       "g")),)
     if settings.acceleration_limit_rad_s2 is not None:
         amax = par["acceleration_limit_rad_s2"]
-        mean = (step(x, u, env)[model.index(joint, "v_rad_s")] - v) / settings.dt_s  # what a plot of v shows
+        mean = (xn[model.index(joint, "v_rad_s")] - v) / settings.dt_s  # what a plot of v shows
         constraints += (Constraint("acceleration_limit", stage("acceleration_limit",
                                                                ca.vertcat(mean - amax, -mean - amax), "g")),)
     return dyn, dyn_jac, costs, terminal_costs, constraints, terminal_constraints, m.current_peak_a

@@ -29,7 +29,7 @@ from ..model import motor
 from ..model.actuated import ActuatedArm, load_model
 from ..model.arm import ELBOW, LEFT_ARM, PAYLOAD_KG
 from ..model.parameters import Bound
-from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem
+from ..ocp import Constraint, Cost, KnotParameters, OptimalControlProblem, term_function
 from ..solvers import DDPSettings, DDPSolver, WarmStart
 from .constraints import joint_limit_constraints
 from .limits import DEFAULT_HOLD_S, HOLD_S, check_fields, check_knots, check_limit_c, winding_limits_c
@@ -139,20 +139,13 @@ class HoldProblem(TaskProblem):
     limits_c: Mapping[str, float]
 
 
-def _stage(name, x, u, p, expr, out):
-    return ca.Function(name, [x, u, p], [expr], ["x", "u", "p"], [out])
-
-
-def _terminal(name, x, p, expr, out):
-    return ca.Function(name, [x, p], [expr], ["x", "p"], [out])
-
-
 def _joint_constraints(model, x, u, p, limits_c, vmax):
-    """Per joint, by name: winding_limit_<j>, bus_voltage_<j>, joint_range_<j>, joint_velocity_<j>."""
-    out = []
+    """Per joint, by name: winding_limit_<j>, bus_voltage_<j> (at the knot's start and end), joint_range_<j>,
+    joint_velocity_<j>."""
+    out, xn = [], ca.SX.sym("x_next", model.nx)
     for k, j in enumerate(model.joints):
-        for kind, g in joint_limit_constraints(model, j, x, u[k], limits_c[j], vmax[k]).items():
-            out.append(Constraint(f"{kind}_{j}", _stage(f"{kind}_{j}", x, u, p, g, "g")))
+        for kind, g in joint_limit_constraints(model, j, x, u[k], limits_c[j], vmax[k], x_next=xn).items():
+            out.append(Constraint(f"{kind}_{j}", term_function(f"{kind}_{j}", g, "g", x, p, u, xn)))
     return out
 
 
@@ -171,7 +164,7 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
     x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", n), ca.SX.sym("p", layout.size)
     par = layout.symbols(p)
     step, jac = model.step_function(dt_s), model.step_jacobians(dt_s)
-    dyn = _stage("hold_dynamics", x, u, p, step(x, u, par["ambient_c"]), "x_next")
+    dyn = term_function("hold_dynamics", step(x, u, par["ambient_c"]), "x_next", x, p, u)
     dyn_jac = ca.Function("hold_dynamics_jacobians", [x, u, p], list(jac(x, u, par["ambient_c"])), ["x", "u", "p"],
                           ["x_next", "A", "B"])
     q = x[[model.index(j, "q_rad") for j in model.joints]]
@@ -179,21 +172,22 @@ def build_hold_problem(model: ActuatedArm, settings: WholeArmSettings, q_goal, t
     w = x[[model.index(j, "winding_c") for j in model.joints]]
     res = ca.vertcat(*[motor.resistance_ohm(model.params[j].motor, w[k]) for k, j in enumerate(model.joints)])
     tracking = ca.sqrt(par["tracking_weight"]) * (q - par["q_ref_rad"])
-    costs = (Cost("tracking", 1.0, _stage("tracking", x, u, p, tracking, "r")),
-             Cost("joule_energy", s.energy_weight, _stage("joule_energy", x, u, p, ca.sqrt(res * dt_s) * u, "r")),
-             Cost("velocity", s.velocity_weight, _stage("velocity", x, u, p, v, "r")))
+    costs = (Cost("tracking", 1.0, term_function("tracking", tracking, "r", x, p, u)),
+             Cost("joule_energy", s.energy_weight,
+                  term_function("joule_energy", ca.sqrt(res * dt_s) * u, "r", x, p, u)),
+             Cost("velocity", s.velocity_weight, term_function("velocity", v, "r", x, p, u)))
     tcosts = (Cost("terminal_tracking", s.tracking_weight,
-                   _terminal("terminal_tracking", x, p, q - par["q_ref_rad"], "r")),
-              Cost("terminal_velocity", 1.0, _terminal("terminal_velocity", x, p, v, "r")))
+                   term_function("terminal_tracking", q - par["q_ref_rad"], "r", x, p)),
+              Cost("terminal_velocity", 1.0, term_function("terminal_velocity", v, "r", x, p)))
     point = payload_point_function(model)(q)
     target, tol = ca.DM(np.asarray(target_m, float)), s.target_tolerance_m
     band = ca.vertcat(par["hold_flag"] * (point - target) - tol, par["hold_flag"] * (target - point) - tol)
     vmax = np.asarray(model.arm.model.velocityLimit, float)
     w_max = ca.DM([limits[j] for j in model.joints])
     cons = tuple(_joint_constraints(model, x, u, p, limits, vmax)) + (
-        Constraint("hold_band", _stage("hold_band", x, u, p, band, "g")),)
-    tcons = (Constraint("terminal_winding_limit", _terminal("terminal_winding_limit", x, p, w - w_max, "g")),
-             Constraint("terminal_hold_band", _terminal("terminal_hold_band", x, p, band, "g")))
+        Constraint("hold_band", term_function("hold_band", band, "g", x, p, u)),)
+    tcons = (Constraint("terminal_winding_limit", term_function("terminal_winding_limit", w - w_max, "g", x, p)),
+             Constraint("terminal_hold_band", term_function("terminal_hold_band", band, "g", x, p)))
     peak = np.array([model.params[j].motor.current_peak_a for j in model.joints])
     move, hold = int(round(s.move_s / dt_s)), int(round(s.hold_s / dt_s))
     check_knots(_SRC, move + hold, dt_s)
