@@ -272,8 +272,8 @@ def knot_model(F, x, u, p, lam, rho, full: bool, terminal: bool = False, margin:
     mapped by the chain rule, dy = T dz with T = [I; A B]: gradient T' l_y, Hessian T' l_yy T, and (``full``) their
     curvature through f, sum_i (l_x+)_i d2 f_i, joins the dynamics' second-order term as ``v_shift`` = l_x+ added
     to its value gradient (:func:`backward_step`). No derivative of the composition is taken: it would
-    differentiate the integrator again in every row (the lift's rk4 knot with the end-of-knot voltage rows:
-    7,696 -> 11,346 instructions).
+    differentiate the integrator again in every row (the lift's fused Riccati step with the end-of-knot voltage
+    rows: 11,346 instructions that way, 7,940 by the chain rule, 7,696 without those rows).
     """
     nx = x.numel()
     if terminal:
