@@ -51,33 +51,30 @@ Method (each part stated, as logged):
   stalled probes of the lift's longest-hold search otherwise spent 14 forward passes per retry, raising
   the regularisation up to reg_max). Passes and updates are counted in ``SolverResult.info``
   (:data:`PASS_COUNTS`).
-- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search,
-  and in Gauss-Newton mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping
-  of a too optimistic model); on a failed backward pass multiplied by ``reg_factor`` or, with
-  ``pivot_jump``, raised to at least rho_reg - 2p (p the non-positive pivot at the first failing
-  knot, the last in time; not beyond ``reg_max``), so that knot's pivot becomes >= |p| in one
-  retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
-  Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift
-  does: ``thermo_ddp.tasks.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the
-  Levenberg-Marquardt damping stalls Gauss-Newton on the multi-joint hold (300 iterations against
-  32), and the jump made receding-horizon re-solves near infeasibility fail more often.
-- Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with
-  no regularisation, the predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no
-  progress is possible above rounding, and |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left
-  lies along the penalty's large curvature; measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's
-  longest-hold probes, at costs of hundreds), the largest gap <=
-  ``gap_tolerance`` and
-  |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps closed) from an
-  iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by
-  a first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero
-  exactly where the full pass's Qu0 is): if within tolerance the solve stops there (K, k are then
-  those of that last pass), otherwise a full backward pass follows as usual.
-- The first backward pass of a solve also evaluates the initial guess (cost, constraints, gaps)
-  in the same sweep over the knots.
-- Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result
-  (WarmStart.from_result shifts them); with multipliers the inner tolerance starts at
-  ``tolerance``. Measured: Gauss-Newton converges slowly when a heating term R(T) i^2 is
-  constrained (its curvature is in the dynamics); use ``full_second_order=True`` there.
+- Regularisation: rho_reg I added to Quu; multiplied by ``reg_factor`` on a failed line search, and in Gauss-Newton
+  mode also after a step shorter than 1/2 (Levenberg-Marquardt-like damping of a too optimistic model); on a failed
+  backward pass multiplied by ``reg_factor`` or, with ``pivot_jump``, raised to at least rho_reg - 2p (p the
+  non-positive pivot at the first failing knot, the last in time; not beyond ``reg_max``), so that knot's pivot
+  becomes >= |p| in one retry instead of climbing from ``reg_min``; divided by ``reg_decrease`` after a full step.
+  Defaults are the conservative schedule (both x10, no jump); a problem may tune them (the lift does:
+  ``thermo_ddp.tasks.lift.DDP_OPTIONS``). Measured: a slow decrease (sqrt 10) with the Levenberg-Marquardt damping
+  stalls Gauss-Newton on the multi-joint hold (300 iterations against 32), and the jump made receding-horizon
+  re-solves near infeasibility fail more often.
+- Stopping: converged when the projected control gradient |Qu|_inf <= ``tolerance`` (or, with no regularisation, the
+  predicted decrease |d1| <= ``decrement_tolerance`` * (1 + |cost|): no progress is possible above rounding, and
+  |Qu|_inf <= ``flat_stationarity`` * (1 + |cost|): the gradient left lies along the penalty's large curvature;
+  measured 8e-4 to 1e-3 on MPC re-solves, 1e-5 to 8e-5 on the lift's longest-hold probes, at costs of hundreds), the
+  largest gap <= ``gap_tolerance`` and |max(g, -lam/rho)|_inf <= ``constraint_tolerance``. After a full step (gaps
+  closed) from an iterate with |Qu|_inf <= sqrt(``tolerance``), |Qu|_inf of the new iterate is first measured by a
+  first-order pass (Qu0 = lu + B'a, a = lx + A'a' + K'Qu0 with the last pass's gains K; zero exactly where the full
+  pass's Qu0 is): if within tolerance the solve stops there (K, k are then those of that last pass), otherwise a full
+  backward pass follows as usual.
+- The first backward pass of a solve also evaluates the initial guess (cost, constraints, gaps) in the same sweep over
+  the knots.
+- Warm start (MPC): trajectories, constraint multipliers and penalty of a previous result (WarmStart.from_result
+  shifts them); with multipliers the inner tolerance starts at ``tolerance``. Measured: Gauss-Newton converges slowly
+  when a heating term R(T) i^2 is constrained (its curvature is in the dynamics); use ``full_second_order=True``
+  there.
 """
 from __future__ import annotations
 
@@ -152,9 +149,8 @@ class DDPSettings:
             require(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 0, _SRC, name, v,
                     "expected an integer >= 0")
         positive = ("tolerance", "decrement_tolerance", "flat_stationarity", "merit_resolution", "gap_tolerance",
-                    "constraint_tolerance",
-                    "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease", "penalty_init",
-                    "penalty_factor", "penalty_max", "line_search_min_step", "infeasibility_growth")
+                    "constraint_tolerance", "inner_tolerance_init", "reg_max", "reg_factor", "reg_decrease",
+                    "penalty_init", "penalty_factor", "penalty_max", "line_search_min_step", "infeasibility_growth")
         for name in positive:
             v = getattr(self, name)
             require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0,
