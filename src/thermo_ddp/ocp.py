@@ -369,7 +369,7 @@ class OptimalControlProblem:
     # -- data checks used by every solver ---------------------------------------------------
     def check_x0(self, x0, source: str = "solve") -> np.ndarray:
         x = np.asarray(x0, dtype=float).reshape(-1) if np.ndim(x0) <= 1 else np.asarray(x0, dtype=float)
-        if x.shape != (self.nx,) or not np.all(np.isfinite(x)):
+        if x.shape != (self.nx,) or not np.isfinite(x).all():
             raise InputError(source, "x0", np.asarray(x0).tolist(), f"expected {self.nx} finite numbers")
         return x
 
@@ -385,9 +385,10 @@ class OptimalControlProblem:
             arr = np.tile(arr, (shape[0], 1))
         if arr.shape != shape:
             raise InputError(source, "params", f"array of shape {arr.shape}", f"expected shape {shape}")
-        bad = np.argwhere(~np.isfinite(arr))
-        if bad.size:
-            raise InputError(source, "params", arr[tuple(bad[0])], "not finite", row=int(bad[0][0]))
+        finite = np.isfinite(arr)
+        if not finite.all():
+            bad = np.argwhere(~finite)[0]
+            raise InputError(source, "params", arr[tuple(bad)], "not finite", row=int(bad[0]))
         return arr
 
     def check_trajectory(self, xs, us, source: str = "warm_start") -> tuple[np.ndarray, np.ndarray]:
@@ -398,7 +399,7 @@ class OptimalControlProblem:
             raise InputError(source, "xs", f"array of shape {xs.shape}", f"expected shape {(N + 1, self.nx)}")
         if us.shape != (N, self.nu):
             raise InputError(source, "us", f"array of shape {us.shape}", f"expected shape {(N, self.nu)}")
-        if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(us))):
+        if not (np.isfinite(xs).all() and np.isfinite(us).all()):
             raise InputError(source, "xs/us", "non-finite values", "warm start must be finite")
         return xs, us
 

@@ -25,7 +25,7 @@ def phr(g, lam, rho, maximum=np.maximum):
 def terms(G, GN, lam, lamN, rho) -> float:
     """The sum of :func:`phr` over the stage and terminal constraints."""
     rg, rN = split(rho, G)
-    return float(np.sum(phr(G, lam, rg)) + np.sum(phr(GN, lamN, rN)))
+    return float(phr(G, lam, rg).sum() + phr(GN, lamN, rN).sum())
 
 
 def multipliers(G, GN, lam, lamN, rho):
@@ -37,10 +37,8 @@ def multipliers(G, GN, lam, lamN, rho):
 def kkt_constraint(G, GN, lam, lamN, rho) -> float:
     """|max(g, -lam/rho)|_inf: zero exactly at a feasible, complementary point."""
     rg, rN = split(rho, G)
-    vals = [np.max(np.abs(np.maximum(G, -lam / rg)))] if G.size else [0.0]
-    if GN.size:
-        vals.append(np.max(np.abs(np.maximum(GN, -lamN / rN))))
-    return float(max(vals))
+    return float(max(np.abs(np.maximum(G, -lam / rg)).max(initial=0.0),
+                     np.abs(np.maximum(GN, -lamN / rN)).max(initial=0.0)))
 
 
 def crossed(G, GN, G_trial, GN_trial, lam, lamN, rho, margin: float, reach: float = 1.0):

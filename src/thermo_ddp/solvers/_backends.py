@@ -117,7 +117,8 @@ def _function(name, inputs, outputs, names_in, names_out, cse=True):
 
 def penalties(n: int, rho) -> np.ndarray:
     """The penalty vector of the passes (``n`` rows: of g, then of g_N) from one value per row or one for all."""
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(rho, dtype=float).ravel(), (n,)))
+    values = np.asarray(rho, dtype=float).ravel()
+    return np.ascontiguousarray(values if values.size == n else np.broadcast_to(values, (n,)))
 
 
 def _local_model_knot(problem, knots):

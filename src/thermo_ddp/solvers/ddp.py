@@ -89,12 +89,12 @@ from .._config import require, settings_from_mapping
 from ..errors import InputError
 from ..ocp import OptimalControlProblem
 from . import _augmented_lagrangian as al
-from ._backends import CasadiBackend, CompiledBackend, compiled_library
+from ._backends import CasadiBackend, CompiledBackend, compiled_library, penalties
 from ._layout import Layout
 from ._line_search import CROSSED_TRIALS, Iterate as _Iterate, backtrack
 from ._numpy_backend import NumpyBackend
 from .kkt import KKT_KEYS, KKTEvaluator, constraint_rows
-from .result import HISTORY_KEYS, STATUSES, LazyKKT, SolverResult, WarmStart, constraint_violation
+from .result import HISTORY_KEYS, STATUSES, LazyKKT, SolverResult, WarmStart
 
 log = logging.getLogger(__name__)
 
@@ -248,8 +248,8 @@ class _Workspace:
         it_, pr = self.it, solver.problem
         view = IterationView(
             self.iteration, float(it_.J), float(it_.J + it_.al_terms(self.lam, self.lamN, self.rho)),
-            constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub), float(gap), float(stat),
-            float(step), float(self.reg), float(alpha), float(np.max(self.rho, initial=0.0)), self.tries)
+            it_.max_violation(pr.u_lb, pr.u_ub), float(gap), float(stat),
+            float(step), float(self.reg), float(alpha), float(self.rho.max(initial=0.0)), self.tries)
         for key in HISTORY_KEYS:
             self.hist[key].append(getattr(view, key))
         return view
@@ -303,7 +303,8 @@ class DDPSolver:
         viol0 = al.row_violation(it_.G, it_.GN) if cold else np.full(rho.size, np.inf)  # cold: vs the guess's
         ws = _Workspace(it_, P, lam, lamN, rho, reg=s.reg_init, start=start, first=first, viol_prev=viol0,
                         omega=max(s.inner_tolerance_init if cold else s.tolerance, s.tolerance))
-        if not all(np.all(np.isfinite(v)) for v in (it_.J, it_.G, it_.GN, it_.C)):
+        if not (np.isfinite(it_.J) and np.isfinite(it_.G).all() and np.isfinite(it_.GN).all()
+                and np.isfinite(it_.C).all()):
             ws.first = None
             ws.stop("numerical_error", "the model gives non-finite values at the initial guess")
             return self._finish(ws)
@@ -330,11 +331,10 @@ class DDPSolver:
                 lamN = np.maximum(np.asarray(m["terminal_constraints"], float), 0.0)
             if m.get("penalty") is not None:
                 if np.size(m["penalty"]) in (1, ng + ngN):  # one for all rows, or one per row
-                    rho = np.clip(np.broadcast_to(np.asarray(m["penalty"], float).ravel(), (ng + ngN,)),
-                                  s.penalty_init, s.penalty_max)
+                    rho = penalties(ng + ngN, m["penalty"]).clip(s.penalty_init, s.penalty_max)
         X = np.array(xs, dtype=float)
         X[0] = x0
-        U = np.ascontiguousarray(np.clip(us, pr.u_lb, pr.u_ub))
+        U = np.ascontiguousarray(us.clip(pr.u_lb, pr.u_ub))
         return X, U, lam, lamN, rho, cold
 
     def _run(self, ws: "_Workspace", callback) -> SolverResult:
@@ -365,7 +365,7 @@ class DDPSolver:
                                                                     ws.reg)
         ws.first = None
         d1, d2, stat, pivot = summary
-        if not (pivot > 0 and np.all(np.isfinite(summary))):
+        if not (pivot > 0 and np.isfinite(summary).all()):
             if flags is not None:
                 return None
             ws.reg = self._increase(ws.reg, policy)
@@ -374,8 +374,8 @@ class DDPSolver:
                 ws.stop("regularisation_failed", "Quu not positive definite up to reg_max")
             return None
         ws.policy, ws.values = policy, values
-        gap = float(np.max(np.abs(it_.C))) if it_.C.size else 0.0
-        kkt_c = al.kkt_constraint(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
+        gap = float(np.abs(it_.C).max(initial=0.0))
+        kkt_c = it_.kkt_constraint(ws.lam, ws.lamN, ws.rho)
         flat = abs(d1) <= s.decrement_tolerance * (1.0 + abs(it_.J))
         return _Direction(policy, float(d1), float(d2), float(stat), gap, kkt_c, flat)
 
@@ -404,7 +404,8 @@ class DDPSolver:
             ws.stop("infeasible", f"locally infeasible: the violation {ws.al_log[-1].violation:.3g} did not halve "
                     f"while the penalty grew {s.infeasibility_growth:g}x")
             return True
-        ws.recent, ws.it.terms = [], None
+        ws.recent = []
+        ws.it.new_multipliers()
         ws.lam, ws.lamN, ws.rho, ws.viol_prev = al.update(s, ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho,
                                                           ws.viol_prev)
         ws.counts["multiplier_updates"] += 1
@@ -430,7 +431,8 @@ class DDPSolver:
         if not band.any():
             return False
         ws.lam = np.where(band, 0.0, ws.lam)
-        ws.recent, ws.it.terms = [], None
+        ws.recent = []
+        ws.it.new_multipliers()
         ws.counts["margin_releases"] += 1
         log.debug("iteration %d: |Qu| stalled at %.2e, %d margin rows released", ws.iteration, d.stat, band.sum())
         return True
@@ -489,7 +491,7 @@ class DDPSolver:
             ws.reg = ws.reg / s.reg_decrease if ws.reg / s.reg_decrease >= s.reg_min else 0.0
         elif ws.alpha < 0.5 and not s.full_second_order:  # Gauss-Newton model too optimistic: damp (LM-like)
             ws.reg = self._increase(ws.reg)
-        step = ws.alpha * float(np.max(np.abs(d.policy[:, : self.problem.nu]), initial=0.0))
+        step = ws.alpha * float(np.abs(d.policy[:, : self.problem.nu]).max(initial=0.0))
         view = ws.record(self, d.stat, d.gap, step, ws.alpha)
         log.debug("iteration %d: cost %.6e stat %.2e gap %.2e alpha %.3g reg %.1e rho %.1e", ws.iteration, ws.it.J,
                   d.stat, d.gap, ws.alpha, ws.reg, view.penalty)
@@ -497,7 +499,7 @@ class DDPSolver:
             ws.stop("stopped", f"stopped by the callback after iteration {ws.iteration}")
             return
         if ws.alpha == 1.0 and d.stat <= s.tolerance ** 0.5 and \
-                al.kkt_constraint(ws.it.G, ws.it.GN, ws.lam, ws.lamN, ws.rho) <= s.constraint_tolerance:
+                ws.it.kkt_constraint(ws.lam, ws.lamN, ws.rho) <= s.constraint_tolerance:
             self._first_order_check(ws, d)
 
     def _first_order_check(self, ws: "_Workspace", d: "_Direction") -> None:
@@ -512,7 +514,7 @@ class DDPSolver:
     def _finish(self, ws: "_Workspace") -> SolverResult:
         it_ = ws.it
         lam_out, lamN_out = al.multipliers(it_.G, it_.GN, ws.lam, ws.lamN, ws.rho)
-        if not (np.all(np.isfinite(lam_out)) and np.all(np.isfinite(lamN_out))):  # a non-finite iterate
+        if not (np.isfinite(lam_out).all() and np.isfinite(lamN_out).all()):  # a non-finite iterate
             lam_out, lamN_out = ws.lam, ws.lamN
         if ws.costates is None and ws.values is not None:
             ws.costates = self.layout.costates(ws.values)
@@ -542,13 +544,13 @@ class DDPSolver:
         multiplier updates' (penalty, violation) log) or a failure reason (status "failed")."""
         pr = self.problem
         solve_s = time.perf_counter() - start
-        viol = constraint_violation(it_.G, it_.GN, it_.C, it_.U, pr.u_lb, pr.u_ub)
+        viol = it_.max_violation(pr.u_lb, pr.u_ub)
         K = k = None
         mult = {"constraints": lam.copy(), "terminal_constraints": lamN.copy(), "penalty": rho.copy()}
         if pol is not None and pol[0] is not None:
             k, K = self.layout.gains(pol[0])
             mult["dynamics"] = pol[1][1:]
-        finite = bool(np.all(np.isfinite(it_.X)) and np.all(np.isfinite(it_.U)) and np.isfinite(it_.J))
+        finite = bool(np.isfinite(it_.X).all() and np.isfinite(it_.U).all() and np.isfinite(it_.J))
         if not finite and status != "numerical_error":
             status, message = "numerical_error", "non-finite iterate"
         viol = viol if np.isfinite(viol) else float("inf")

@@ -159,11 +159,6 @@ class WarmStart:
 
 def constraint_violation(g: np.ndarray, gN: np.ndarray, gaps: np.ndarray, us: np.ndarray,
                          u_lb: np.ndarray, u_ub: np.ndarray) -> float:
-    """Largest violation of inequalities, control bounds and dynamics (all >= 0)."""
-    parts = [0.0]
-    for arr in (g, gN, us - u_ub, u_lb - us):
-        if arr.size:
-            parts.append(float(np.max(arr)))
-    if gaps.size:
-        parts.append(float(np.max(np.abs(gaps))))
-    return max(parts)
+    """Largest violation of inequalities, control bounds and dynamics (all >= 0; NaN where any is NaN)."""
+    return float(np.max((g.max(initial=0.0), gN.max(initial=0.0), (us - u_ub).max(initial=0.0),
+                         (u_lb - us).max(initial=0.0), np.abs(gaps).max(initial=0.0))))
