@@ -238,15 +238,20 @@ class _Search:
 
     def settle(self, knots: int) -> None:
         """Solve the longest feasible hold ``knots`` once more from the cold initial guess when its plan came
-        from a warm start only through the ladder's fallback (its first rung reached no verdict), and keep the
-        lower-cost feasible plan: the answer should not hang on a neighbour's start that did not hold. Measured
-        at 40 kg, 85.9 °C (benchmarks/README.md): 604.59 from the neighbour's trajectories, 603.21 from the
-        cold guess (IPOPT 603.21), and the boundary then confirmed from it in one solve instead of five."""
+        from a warm start only through a later rung of the same solver (the first, from the neighbour's
+        multipliers, reached no verdict), and keep the lower-cost feasible plan: the answer should not hang on
+        a neighbour's start that did not hold. A plan of the ladder's reference solver (IPOPT) is kept as it
+        is: from the cold guess DDP then went down the whole ladder again (49.7 kg, 96 °C: 4 more solves, the
+        same cost). Measured at 40 kg, 85.9 °C (benchmarks/README.md): 604.59 from the neighbour's
+        trajectories, 603.21 from the cold guess (IPOPT 603.21), the boundary then confirmed from it in one
+        solve instead of five."""
         if knots < 0 or knots in self.settled:
             return
         self.settled.add(knots)
         probe, outcome = self.probes[knots]
         if len(outcome.attempts) < 2 or self.source[knots] is None:
+            return
+        if outcome.result.solver != outcome.attempts[0][1].solver:  # the reference's plan
             return
         cold = self.solve(probe, None)
         log.info("hold %.1f s again from the cold guess: %s", probe.hold_s, cold.verdict or "no verdict")
