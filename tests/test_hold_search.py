@@ -85,3 +85,34 @@ def test_the_boundary_verdict_is_confirmed_from_the_longest_holds_plan(lift, mon
     search = hold_search.longest_feasible_hold(lift, solve, 42)
     assert search.knots == 42 and search.probes[43][1].verdict == "infeasible"
     assert sorted(search.probes) == [40, 41, 42, 43] and len(search.replaced) == 1  # 42 solved twice
+
+
+@pytest.mark.parametrize("rungs, cold_cost, cost, cold_solves", [
+    (("ddp", "ddp"), 1.0, 1.0, 2), (("ddp", "ddp"), 3.0, 2.0, 2), (("ddp",), 1.0, 2.0, 1),
+    (("ddp", "ipopt"), 1.0, 2.0, 1)])
+def test_a_longest_hold_reached_by_the_fallback_is_solved_again_from_the_cold_guess(lift, monkeypatch, rungs,
+                                                                                      cold_cost, cost, cold_solves):
+    """The longest feasible hold (40 knots), reached from its neighbour's plan only at the ladder's second rung
+    of the same solver, is solved once more from the cold guess and the lower-cost feasible plan kept (the
+    other counted as replaced); reached at the first rung, or by the reference solver (the ladder's last), it
+    is not solved again. The oracle: feasible up to 40 knots, cost 2 from a warm start, ``cold_cost`` from the
+    cold guess (``warm`` None)."""
+    from thermo_ddp.tasks import hold_search
+    from thermo_ddp.tasks.attempts import Outcome
+    cold = []
+
+    def solve(probe, warm):
+        k = probe.hold_knots[1] - probe.hold_knots[0]
+        cold.extend([k] if warm is None else [])
+        tries = rungs if warm is not None and k == 40 else ("ddp",)
+        plans = [types.SimpleNamespace(xs=np.full((lift.params.shape[0], lift.x0.size), float(k)),
+                                       us=np.full((lift.params.shape[0] - 1, 1), float(k)), multipliers={},
+                                       cost=cold_cost if warm is None else 2.0, solver=name) for name in tries]
+        return Outcome(plans[-1], "feasible" if k <= 40 else "infeasible", tuple(zip(tries, plans)))
+
+    monkeypatch.setattr(hold_search, "_next_guess",
+                        lambda lp, knots, outcome, lo, hi, step, first=False: knots + 1 if outcome.feasible else 40)
+    search = hold_search.longest_feasible_hold(lift, solve, 42)
+    assert search.knots == 40 and sorted(search.probes) == [40, 41, 42]
+    assert search.best[1].result.cost == cost and cold == [42, 40][:cold_solves]
+    assert len(search.replaced) == cold_solves - 1

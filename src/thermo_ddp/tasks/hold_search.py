@@ -10,7 +10,9 @@ does when the limit binds; the first probe's by about half its distance, see :fu
 from a feasible plan that does not reach the limit it is short. When it misses on the same side twice the
 probes gallop (steps doubling); bisection takes over after :data:`GUIDED_PROBES` probes. The infeasible verdict
 one knot past the longest hold is stated only from that hold's plan stretched and its multipliers
-(:func:`boundary_warm_start`; solved again when it came from another start). The default 40 kg searches take
+(:func:`boundary_warm_start`; solved again when it came from another start); that hold's plan, when its warm
+start reached a verdict only through a later rung of the same solver, is solved again from the cold guess first, the
+lower-cost plan kept (:meth:`_Search.settle`). The default 40 kg searches take
 3 solves each: 97 DDP iterations at 84 °C (the confirmation of the boundary 20 of them) and 134 at 140 °C (4
 solves and 128 iterations at 84 °C with a 1-knot bias; 6 and 4 solves by galloping and bisection;
 benchmarks/README.md).
@@ -213,6 +215,7 @@ class _Search:
         self.probes: dict[int, tuple[object, Outcome]] = {}
         self.source: dict[int, int | None] = {}
         self.replaced: list[Outcome] = []
+        self.settled: set[int] = set()
 
     def run(self, knots: int, source: int | None = None) -> Outcome:
         """Solve the probe holding ``knots``, from probe ``source``'s plan stretched (default: the nearest)."""
@@ -232,6 +235,31 @@ class _Search:
         stretched: the four certificates the random requests found local (DDP's longest hold two or more knots
         short of IPOPT's, benchmarks/README.md) came from a cold start or an infeasible neighbour's plan."""
         return lo >= 0 and hi == lo + 1 and hi in self.probes and self.source[hi] != lo
+
+    def settle(self, knots: int) -> None:
+        """Solve the longest feasible hold ``knots`` once more from the cold initial guess when its plan came
+        from a warm start only through a later rung of the same solver (the first, from the neighbour's
+        multipliers, reached no verdict), and keep the lower-cost feasible plan: the answer should not hang on
+        a neighbour's start that did not hold. A plan of the ladder's reference solver (IPOPT) is kept as it
+        is: from the cold guess DDP then went down the whole ladder again (49.7 kg, 96 °C: 4 more solves, the
+        same cost). Measured at 40 kg, 85.9 °C (benchmarks/README.md): 604.59 from the neighbour's
+        trajectories, 603.21 from the cold guess (IPOPT 603.21), the boundary then confirmed from it in one
+        solve instead of five."""
+        if knots < 0 or knots in self.settled:
+            return
+        self.settled.add(knots)
+        probe, outcome = self.probes[knots]
+        if len(outcome.attempts) < 2 or self.source[knots] is None:
+            return
+        if outcome.result.solver != outcome.attempts[0][1].solver:  # the reference's plan
+            return
+        cold = self.solve(probe, None)
+        log.info("hold %.1f s again from the cold guess: %s", probe.hold_s, cold.verdict or "no verdict")
+        if cold.feasible and cold.result.cost < outcome.result.cost:
+            self.replaced.append(outcome)
+            self.probes[knots], self.source[knots] = (probe, cold), None
+        else:
+            self.replaced.append(cold)
 
     def result(self, lo: int, failed: int | None = None) -> "HoldSearch":
         return HoldSearch(lo, self.probes, failed, tuple(self.replaced))
@@ -270,7 +298,11 @@ def longest_feasible_hold(lp, solve: Callable[[object, WarmStart | None], Outcom
     on longer ones (so nothing is confirmed: a real-time review spends no solve on it)."""
     search, top = _Search(lp, solve, stop_without_verdict), lp.hold_knots[1] - lp.hold_knots[0]
     lo, hi, guess, step, last = -1, top + 1, first_knots, 1, None
-    while hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi)):
+    while True:
+        if stop_without_verdict and hi - lo <= 1:
+            search.settle(lo)
+        if not (hi - lo > 1 or (stop_without_verdict and search.unconfirmed(lo, hi))):
+            break
         confirm = hi - lo <= 1
         guided = len(search.probes) < GUIDED_PROBES
         knots = hi if confirm else int(np.clip(guess, lo + 1, hi - 1)) if guided else (lo + hi) // 2
