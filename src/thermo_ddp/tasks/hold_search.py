@@ -11,11 +11,10 @@ from a feasible plan that does not reach the limit it is short. When it misses o
 probes gallop (steps doubling); bisection takes over after :data:`GUIDED_PROBES` probes. The infeasible verdict
 one knot past the longest hold is stated only from that hold's plan stretched and its multipliers
 (:func:`boundary_warm_start`; solved again when it came from another start); that hold's plan, when its warm
-start reached a verdict only through a later rung of the same solver, is solved again from the cold guess first, the
-lower-cost plan kept (:meth:`_Search.settle`). The default 40 kg searches take
-3 solves each: 97 DDP iterations at 84 °C (the confirmation of the boundary 20 of them) and 134 at 140 °C (4
-solves and 128 iterations at 84 °C with a 1-knot bias; 6 and 4 solves by galloping and bisection;
-benchmarks/README.md).
+start reached a verdict only through a later rung of the same solver, is first solved again from the cold
+guess, the lower-cost plan kept (:meth:`_Search.settle`). The default 40 kg searches take 3 solves each: 98 DDP
+iterations at 84 °C and 110 at 140 °C (4 solves at 84 °C with a 1-knot bias; 6 and 4 solves by galloping and
+bisection; benchmarks/README.md).
 """
 from __future__ import annotations
 
